@@ -1,0 +1,51 @@
+# Shared build settings for every target of the project.
+
+# Warnings for our code only (LibTorch and OpenCV headers are SYSTEM includes).
+set(TH_WARNINGS -Wall -Wextra -Wno-unused-parameter)
+
+# One precompiled <torch/torch.h> for the whole project: th_pch owns it, every other target
+# reuses it (the flags below are identical everywhere, which REUSE_FROM requires).
+add_library(th_pch STATIC ${PROJECT_SOURCE_DIR}/lib/core/pch.cpp)
+target_include_directories(th_pch SYSTEM PUBLIC ${TORCH_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
+target_link_libraries(th_pch PUBLIC ${TORCH_LIBRARIES})
+target_compile_options(th_pch PRIVATE ${TH_WARNINGS})
+target_precompile_headers(th_pch PRIVATE <torch/torch.h>)
+
+function(th_use_pch target)
+  target_compile_options(${target} PRIVATE ${TH_WARNINGS})
+  target_precompile_headers(${target} REUSE_FROM th_pch)
+endfunction()
+
+# th_library(<name> DEPS <targets...>): a library made of every .cpp in the calling folder.
+function(th_library name)
+  cmake_parse_arguments(ARG "" "" "DEPS" ${ARGN})
+  file(GLOB sources CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/*.cpp)
+  if(NOT sources)
+    message(STATUS "${name}: no sources yet, skipped")
+    return()
+  endif()
+  add_library(${name} STATIC ${sources})
+  target_include_directories(${name} PUBLIC ${PROJECT_SOURCE_DIR}/lib)
+  target_link_libraries(${name} PUBLIC th_pch ${ARG_DEPS})
+  th_use_pch(${name})
+endfunction()
+
+# th_test(<name> DEPS <targets...>): a Catch2 executable of every .cpp in the calling folder,
+# registered with CTest test by test. Tests run with the repository as working directory and
+# TH_TEST_TMP pointing at a scratch folder in the build tree.
+function(th_test name)
+  cmake_parse_arguments(ARG "" "" "DEPS;PROPERTIES" ${ARGN})
+  file(GLOB sources CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/*.cpp)
+  if(NOT sources)
+    message(STATUS "${name}: no tests yet, skipped")
+    return()
+  endif()
+  add_executable(${name} ${sources} ${PROJECT_SOURCE_DIR}/tests/support/catch_main.cpp)
+  target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests)
+  target_link_libraries(${name} PRIVATE Catch2::Catch2 ${ARG_DEPS})
+  th_use_pch(${name})
+  catch_discover_tests(${name}
+    WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
+    TEST_PREFIX "${name}:"
+    PROPERTIES ENVIRONMENT "TH_TEST_TMP=${CMAKE_BINARY_DIR}/test_tmp;TH_PYTHON=${TH_PYTHON};TH_BUILD_DIR=${CMAKE_BINARY_DIR}" ${ARG_PROPERTIES})
+endfunction()

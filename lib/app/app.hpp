@@ -1,0 +1,51 @@
+#pragma once
+// What every executable shares: common command-line options, config loading with overrides,
+// the run directory (resolved config + log), BLAS/device/thread set-up, and one-line errors.
+
+#include <CLI/CLI.hpp>
+#include <torch/types.h>
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+
+namespace th::app {
+
+struct CommonOptions {
+  std::string config = "configs/default.yaml";
+  std::vector<std::string> overrides;  // key.sub=value
+  std::string out;                     // run directory
+  std::string device;                  // overrides config `device` when set
+  int threads = -1;                    // overrides config `threads` when >= 0
+  bool dry_run = false;
+  bool verbose = false;
+};
+
+// Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional
+// key=value overrides on `cli`.
+void add_common_options(CLI::App& cli, CommonOptions& options);
+
+struct RunContext {
+  Config config;
+  YAML::Node resolved;            // the config as a tree, every field included
+  std::filesystem::path run_dir;  // empty when the command writes nothing (dry run, no --out)
+  torch::Device device = torch::kCPU;
+};
+
+// Loads the config (file + overrides + --device/--threads), sets up logging, threads and the
+// device, and, when `out` is set (or `default_out` is non-empty), creates the run directory
+// with config.yaml and log.txt. Logs the BLAS in use.
+RunContext start_run(const CommonOptions& options, const std::string& app_name,
+                     const std::string& default_out = "");
+
+// Runs `body` and turns every failure into one line on stderr and a non-zero exit code:
+// 2 for user errors (th::Error, bad command line), 3 for internal errors.
+int guarded_main(const std::string& app_name, const std::function<int()>& body);
+
+// "Model  6,922,244" style thousands separators.
+std::string with_commas(int64_t n);
+
+}  // namespace th::app

@@ -1,0 +1,79 @@
+#include "core/config.hpp"
+
+namespace th {
+namespace {
+
+std::string key(const std::string& path, const char* name) {
+  return config::detail::join_path(path, name);
+}
+
+template <class T>
+void require(bool ok, const std::string& path, const char* name, const T& value, const char* why) {
+  if (!ok) fail("config key '", key(path, name), "' = ", value, ": ", why);
+}
+
+void require_range(const std::vector<double>& r, const std::string& path, const char* name) {
+  if (r.size() != 2 || r[0] > r[1])
+    fail("config key '", key(path, name), "' must be a range [low, high] with low <= high");
+}
+
+}  // namespace
+
+void validate_section(const DataConfig& c, const std::string& path) {
+  require(c.ratio > 0 && c.ratio <= 1, path, "ratio", c.ratio, "must be in (0, 1]");
+  require(c.patch.count > 0, path, "patch.count", c.patch.count, "must be positive");
+  require(c.patch.size > 0, path, "patch.size", c.patch.size, "must be positive");
+  require(c.patch.body_prob >= 0 && c.patch.body_prob <= 1, path, "patch.body_prob",
+          c.patch.body_prob, "must be a probability");
+  require(c.workers >= 0, path, "workers", c.workers, "must be >= 0");
+  require(c.prefetch >= 1, path, "prefetch", c.prefetch, "must be >= 1");
+  require(c.visibility != "files" || !c.visibility_root.empty(), path, "visibility_root",
+          "''", "must name a folder when data.visibility is 'files'");
+  require_range(c.jitter.brightness, path, "jitter.brightness");
+  require_range(c.jitter.contrast, path, "jitter.contrast");
+  require_range(c.jitter.saturation, path, "jitter.saturation");
+  require_range(c.jitter.hue, path, "jitter.hue");
+}
+
+void validate_section(const ModelConfig& c, const std::string& path) {
+  const auto& g = c.grouping;
+  require(g.num_tokens > 0, path, "grouping.num_tokens", g.num_tokens, "must be positive");
+  require(c.dparf.nk >= 1 && c.dparf.nk <= g.num_tokens, path, "dparf.nk", c.dparf.nk,
+          "must be between 1 and grouping.num_tokens");
+  require(c.dparf.softmax_temperature > 0, path, "dparf.softmax_temperature",
+          c.dparf.softmax_temperature, "must be positive");
+  require(c.transhe.heads > 0 && c.transhe.dim % c.transhe.heads == 0, path, "transhe.heads",
+          c.transhe.heads, "must divide transhe.dim");
+  require(c.transhe.pe_freqs * 6 == c.transhe.dim, path, "transhe.pe_freqs", c.transhe.pe_freqs,
+          "6 x pe_freqs (sin and cos of x, y, z per frequency) must equal transhe.dim");
+  require(c.fdi.appearance || c.fdi.human, path, "fdi", "{appearance: false, human: false}",
+          "at least one of the two branches must stay on");
+  require(!g.kmeans_file.empty() ? g.kind == "canonical_kmeans" : true, path, "grouping.kmeans_file",
+          g.kmeans_file, "a k-means label file only applies to grouping.kind canonical_kmeans");
+  require(!(g.kind == "observation_grid" && c.transhe.position == "canonical"), path,
+          "transhe.position", c.transhe.position,
+          "observation-space grouping has no canonical token position; use 'observation'");
+  if (c.representation == "spc_trilinear") {
+    require(c.fdi.human, path, "fdi.human", "false",
+            "the SPC + trilinear baseline is a human representation; it needs fdi.human");
+    require(c.spc.voxel_size > 0, path, "spc.voxel_size", c.spc.voxel_size, "must be positive");
+  }
+}
+
+void validate_section(const RenderConfig& c, const std::string& path) {
+  require(c.samples >= 2, path, "samples", c.samples, "must be >= 2");
+  require(c.cull_distance > 0, path, "cull_distance", c.cull_distance, "must be positive");
+  require(c.chunk_points >= 1024, path, "chunk_points", c.chunk_points, "must be >= 1024");
+}
+
+void validate_section(const TrainConfig& c, const std::string& path) {
+  require(c.lr > 0, path, "lr", c.lr, "must be positive");
+  require(c.epochs > 0, path, "epochs", c.epochs, "must be positive");
+  require(c.iters_per_epoch > 0, path, "iters_per_epoch", c.iters_per_epoch, "must be positive");
+  require(c.warmup_epochs >= 0 && c.warmup_epochs < c.epochs, path, "warmup_epochs",
+          c.warmup_epochs, "must be in [0, epochs)");
+  require(c.grad_clip > 0, path, "grad_clip", c.grad_clip, "must be positive");
+  require(c.lpips_weight >= 0, path, "lpips_weight", c.lpips_weight, "must be >= 0");
+}
+
+}  // namespace th

@@ -1,0 +1,270 @@
+#pragma once
+// The option tree of TransHuman-C++ with the defaults of SPEC.md. configs/default.yaml states
+// the same values; a test checks that the two agree. Each module receives the section it needs.
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "core/config_io.hpp"
+
+namespace th {
+
+// ---- data (SPEC 1, 2.1, 5) --------------------------------------------------------------
+struct PatchConfig {
+  int count = 6;            // patches per target image
+  int size = 20;            // side in pixels
+  double body_prob = 0.8;   // probability that a patch centre lies on the person
+};
+
+struct JitterConfig {
+  bool enabled = true;  // training only; same parameters for target and references
+  std::vector<double> brightness{0.2, 2.0};
+  std::vector<double> contrast{0.3, 2.0};
+  std::vector<double> saturation{0.2, 2.0};
+  std::vector<double> hue{-0.5, 0.5};
+};
+
+struct DataConfig {
+  std::string dataset = "synthetic";            // zju_mocap | h36m | synthetic
+  std::string root = "data/synthetic";           // folder holding one folder per human
+  std::string split_file = "data_splits/synthetic.yaml";
+  std::string train_setting = "training";
+  std::string test_setting = "identity";         // pose | identity | one_shot | cross_dataset | fitting
+  std::string smpl_model = "";                   // SMPL .pkl/.npz; empty: <root>/smpl_model.npz
+  double ratio = 0.5;                            // image resize factor
+  std::string visibility = "rasterize";          // rasterize | files
+  std::string visibility_root = "";              // for visibility: files (NHP's zju_rasterization)
+  double box_padding = 0.05;                     // world AABB padding on z (metres)
+  PatchConfig patch;
+  JitterConfig jitter;
+  int workers = 2;                               // background loader threads
+  int prefetch = 4;                              // samples queued ahead
+};
+
+// ---- model (SPEC 2.5, 3) -----------------------------------------------------------------
+struct EncoderConfig {
+  std::string pretrained = "";        // ResNet-18 weights file from scripts/export_pretrained.py
+  std::string batchnorm = "batch";    // batch [parity] | running
+  bool fast_sampling = true;          // SPEC 3.1/9: sample low-res maps, no (V,384,H,W) tensor
+};
+
+struct GroupingConfig {
+  std::string kind = "canonical_kmeans";  // canonical_kmeans | canonical_grid | observation_grid
+  int num_tokens = 300;                   // Nt
+  std::string kmeans_file = "";           // reference kmeans_dict_300.npy (optional)
+  std::string cache_dir = "cache";        // k-means labels cached here, keyed by model and Nt
+  int64_t seed = 0;
+  std::string mean_over = "all";          // all [parity] | visible
+};
+
+struct TransHEConfig {
+  bool enabled = true;             // false: tokens go straight to DPaRF (w/o transformer)
+  std::string position = "canonical";  // canonical | observation (PE of posed token centres)
+  int dim = 192;
+  int depth = 12;
+  int heads = 3;
+  int mlp_dim = 768;
+  int pe_freqs = 32;
+  double pe_scale = 1.5;           // Pc = mean(v_template[c]) / pe_scale
+};
+
+struct DPaRFConfig {
+  int nk = 7;                          // nearest fields
+  std::string coordinate = "relative";  // relative | absolute | none
+  double softmax_temperature = 0.5;    // w = softmax(-d / T)
+  int pe_freqs = 10;
+};
+
+struct FDIConfig {
+  bool appearance = true;  // a: image features of the reference views
+  bool human = true;       // h: the human representation branch
+  bool raw_rgb = true;     // upsample_color channels in p_v
+};
+
+struct SPCConfig {
+  double voxel_size = 0.005 * 4;  // coarse grid for the SPC + trilinear baseline
+  int channels = 64;
+};
+
+struct ModelConfig {
+  std::string representation = "transhuman";  // transhuman | spc_trilinear
+  EncoderConfig encoder;
+  GroupingConfig grouping;
+  TransHEConfig transhe;
+  DPaRFConfig dparf;
+  FDIConfig fdi;
+  SPCConfig spc;
+};
+
+// ---- rendering (SPEC 4) ------------------------------------------------------------------
+struct RenderConfig {
+  int samples = 64;              // per ray (16: the paper's fast variant)
+  bool progressive = true;       // inference: distance culling, colour only where sigma > 0
+  double cull_distance = 0.1;    // metres from the nearest body vertex
+  int64_t chunk_points = 65536;  // per-point work is batched in chunks of this many points
+};
+
+// ---- training (SPEC 5) -------------------------------------------------------------------
+struct TrainConfig {
+  int epochs = 3000;
+  int iters_per_epoch = 500;
+  double lr = 7e-4;
+  double min_lr = 1e-6;
+  int warmup_epochs = 300;
+  double beta1 = 0.9;
+  double beta2 = 0.999;
+  double eps = 1e-8;
+  double grad_clip = 40.0;          // element-wise
+  double lpips_weight = 0.1;
+  std::string lpips_weights = "";   // file from scripts/export_lpips.py; empty: term off
+  bool skip_far_points = false;     // cull points > cull_distance from the body in training too
+  int save_every_epochs = 10;
+  int val_every_epochs = 10;
+  int val_views = 2;
+  int log_every_steps = 10;
+};
+
+// ---- evaluation (SPEC 6) -----------------------------------------------------------------
+struct EvalConfig {
+  std::string setting = "identity";
+  std::string lpips_weights = "";
+  int limit = 0;                 // 0: all images
+  bool save_images = true;
+};
+
+struct Config {
+  int64_t seed = 42;
+  std::string device = "auto";  // auto | cpu | cuda
+  int threads = 0;              // 0: one per core
+  DataConfig data;
+  ModelConfig model;
+  RenderConfig render;
+  TrainConfig train;
+  EvalConfig eval;
+};
+
+// ---- field lists -------------------------------------------------------------------------
+template <class V> void visit_fields(V& v, PatchConfig& c) {
+  v("count", c.count);
+  v("size", c.size);
+  v("body_prob", c.body_prob);
+}
+template <class V> void visit_fields(V& v, JitterConfig& c) {
+  v("enabled", c.enabled);
+  v("brightness", c.brightness);
+  v("contrast", c.contrast);
+  v("saturation", c.saturation);
+  v("hue", c.hue);
+}
+template <class V> void visit_fields(V& v, DataConfig& c) {
+  v.choice("dataset", c.dataset, {"zju_mocap", "h36m", "synthetic"});
+  v("root", c.root);
+  v("split_file", c.split_file);
+  v("train_setting", c.train_setting);
+  v("test_setting", c.test_setting);
+  v("smpl_model", c.smpl_model);
+  v("ratio", c.ratio);
+  v.choice("visibility", c.visibility, {"rasterize", "files"});
+  v("visibility_root", c.visibility_root);
+  v("box_padding", c.box_padding);
+  v("patch", c.patch);
+  v("jitter", c.jitter);
+  v("workers", c.workers);
+  v("prefetch", c.prefetch);
+}
+template <class V> void visit_fields(V& v, EncoderConfig& c) {
+  v("pretrained", c.pretrained);
+  v.choice("batchnorm", c.batchnorm, {"batch", "running"});
+  v("fast_sampling", c.fast_sampling);
+}
+template <class V> void visit_fields(V& v, GroupingConfig& c) {
+  v.choice("kind", c.kind, {"canonical_kmeans", "canonical_grid", "observation_grid"});
+  v("num_tokens", c.num_tokens);
+  v("kmeans_file", c.kmeans_file);
+  v("cache_dir", c.cache_dir);
+  v("seed", c.seed);
+  v.choice("mean_over", c.mean_over, {"all", "visible"});
+}
+template <class V> void visit_fields(V& v, TransHEConfig& c) {
+  v("enabled", c.enabled);
+  v.choice("position", c.position, {"canonical", "observation"});
+  v("dim", c.dim);
+  v("depth", c.depth);
+  v("heads", c.heads);
+  v("mlp_dim", c.mlp_dim);
+  v("pe_freqs", c.pe_freqs);
+  v("pe_scale", c.pe_scale);
+}
+template <class V> void visit_fields(V& v, DPaRFConfig& c) {
+  v("nk", c.nk);
+  v.choice("coordinate", c.coordinate, {"relative", "absolute", "none"});
+  v("softmax_temperature", c.softmax_temperature);
+  v("pe_freqs", c.pe_freqs);
+}
+template <class V> void visit_fields(V& v, FDIConfig& c) {
+  v("appearance", c.appearance);
+  v("human", c.human);
+  v("raw_rgb", c.raw_rgb);
+}
+template <class V> void visit_fields(V& v, SPCConfig& c) {
+  v("voxel_size", c.voxel_size);
+  v("channels", c.channels);
+}
+template <class V> void visit_fields(V& v, ModelConfig& c) {
+  v.choice("representation", c.representation, {"transhuman", "spc_trilinear"});
+  v("encoder", c.encoder);
+  v("grouping", c.grouping);
+  v("transhe", c.transhe);
+  v("dparf", c.dparf);
+  v("fdi", c.fdi);
+  v("spc", c.spc);
+}
+template <class V> void visit_fields(V& v, RenderConfig& c) {
+  v("samples", c.samples);
+  v("progressive", c.progressive);
+  v("cull_distance", c.cull_distance);
+  v("chunk_points", c.chunk_points);
+}
+template <class V> void visit_fields(V& v, TrainConfig& c) {
+  v("epochs", c.epochs);
+  v("iters_per_epoch", c.iters_per_epoch);
+  v("lr", c.lr);
+  v("min_lr", c.min_lr);
+  v("warmup_epochs", c.warmup_epochs);
+  v("beta1", c.beta1);
+  v("beta2", c.beta2);
+  v("eps", c.eps);
+  v("grad_clip", c.grad_clip);
+  v("lpips_weight", c.lpips_weight);
+  v("lpips_weights", c.lpips_weights);
+  v("skip_far_points", c.skip_far_points);
+  v("save_every_epochs", c.save_every_epochs);
+  v("val_every_epochs", c.val_every_epochs);
+  v("val_views", c.val_views);
+  v("log_every_steps", c.log_every_steps);
+}
+template <class V> void visit_fields(V& v, EvalConfig& c) {
+  v("setting", c.setting);
+  v("lpips_weights", c.lpips_weights);
+  v("limit", c.limit);
+  v("save_images", c.save_images);
+}
+template <class V> void visit_fields(V& v, Config& c) {
+  v("seed", c.seed);
+  v.choice("device", c.device, {"auto", "cpu", "cuda"});
+  v("threads", c.threads);
+  v("data", c.data);
+  v("model", c.model);
+  v("render", c.render);
+  v("train", c.train);
+  v("eval", c.eval);
+}
+
+// Value checks across fields (ranges, incompatible ablation switches); throw th::Error.
+void validate_section(const DataConfig& c, const std::string& path);
+void validate_section(const ModelConfig& c, const std::string& path);
+void validate_section(const RenderConfig& c, const std::string& path);
+void validate_section(const TrainConfig& c, const std::string& path);
+
+}  // namespace th

@@ -1,0 +1,176 @@
+#include "core/config_io.hpp"
+
+#include <algorithm>
+#include <fstream>
+#include <sstream>
+
+namespace th::config {
+namespace fs = std::filesystem;
+
+namespace {
+
+// Recursively merges `over` into `base` (maps merge key by key; anything else replaces).
+void merge_into(YAML::Node base, const YAML::Node& over) {
+  for (const auto& kv : over) {
+    const std::string key = kv.first.as<std::string>();
+    YAML::Node existing = base[key];
+    if (existing.IsDefined() && existing.IsMap() && kv.second.IsMap()) {
+      merge_into(existing, kv.second);
+    } else {
+      base[key] = YAML::Clone(kv.second);
+    }
+  }
+}
+
+YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
+  std::error_code ec;
+  const fs::path canonical = fs::weakly_canonical(file, ec);
+  if (!fs::is_regular_file(file)) fail("config file '", file.string(), "' does not exist");
+  if (std::find(chain.begin(), chain.end(), canonical) != chain.end())
+    fail("config file '", file.string(), "' is its own parent (inheritance cycle)");
+  chain.push_back(canonical);
+
+  YAML::Node node;
+  try {
+    node = YAML::LoadFile(file.string());
+  } catch (const YAML::Exception& e) {
+    fail("config file '", file.string(), "': YAML error at line ", e.mark.line + 1, ", column ",
+         e.mark.column + 1, ": ", e.msg);
+  }
+  if (node.IsNull()) node = YAML::Node(YAML::NodeType::Map);
+  if (!node.IsMap()) fail("config file '", file.string(), "' must hold a map of keys");
+
+  const YAML::Node parent = node["parent"];
+  if (!parent.IsDefined() || parent.IsNull()) return node;
+  if (!parent.IsScalar()) fail("config file '", file.string(), "': 'parent' must be a file name");
+  const fs::path parent_file = file.parent_path() / parent.as<std::string>();
+  YAML::Node merged = load_file_chain(parent_file, chain);
+  node.remove("parent");
+  merge_into(merged, node);
+  return merged;
+}
+
+size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diag = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] != b[j - 1])});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+}  // namespace
+
+YAML::Node load_tree(const fs::path& file, const std::vector<std::string>& overrides) {
+  std::vector<fs::path> chain;
+  YAML::Node tree = load_file_chain(file, chain);
+  for (const auto& o : overrides) apply_override(tree, o);
+  return tree;
+}
+
+void apply_override(YAML::Node& root, const std::string& text) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos || eq == 0)
+    fail("override '", text, "' must look like key.sub.key=value");
+  const std::string path = text.substr(0, eq);
+  const std::string raw = text.substr(eq + 1);
+
+  std::vector<std::string> keys;
+  std::stringstream ss(path);
+  for (std::string k; std::getline(ss, k, '.');) {
+    if (k.empty()) fail("override '", text, "': empty key in '", path, "'");
+    keys.push_back(k);
+  }
+  YAML::Node value;
+  try {
+    value = raw.empty() ? YAML::Node(std::string()) : YAML::Load(raw);
+  } catch (const YAML::Exception& e) {
+    fail("override '", text, "': cannot parse value '", raw, "': ", e.msg);
+  }
+
+  // Walk down with fresh handles (yaml-cpp nodes are references; reassigning would alias).
+  std::vector<YAML::Node> nodes{root};
+  for (size_t i = 0; i + 1 < keys.size(); ++i) {
+    YAML::Node child = nodes.back()[keys[i]];
+    if (!child.IsDefined() || child.IsNull()) {
+      nodes.back()[keys[i]] = YAML::Node(YAML::NodeType::Map);
+      child = nodes.back()[keys[i]];
+    } else if (!child.IsMap()) {
+      fail("override '", text, "': '", keys[i], "' is a value, not a section");
+    }
+    nodes.push_back(child);
+  }
+  nodes.back()[keys.back()] = value;
+}
+
+void Reader::check_unknown() const {
+  if (!node_.IsMap()) return;
+  for (const auto& kv : node_) {
+    const std::string key = kv.first.as<std::string>();
+    if (seen_.count(key)) continue;
+    std::string best;
+    size_t best_d = 3;  // suggest only close matches
+    for (const auto& known : seen_) {
+      const size_t d = edit_distance(key, known);
+      if (d < best_d) best_d = d, best = known;
+    }
+    std::string known_list;
+    for (const auto& known : seen_) known_list += (known_list.empty() ? "" : ", ") + known;
+    if (!best.empty())
+      fail("unknown config key '", detail::join_path(path_, key), "' (did you mean '",
+           detail::join_path(path_, best), "'?)");
+    fail("unknown config key '", detail::join_path(path_, key), "' (known here: ", known_list, ")");
+  }
+}
+
+void write_yaml(const fs::path& file, const YAML::Node& tree) {
+  YAML::Emitter out;
+  out << tree;
+  const fs::path tmp = file.string() + ".tmp";
+  {
+    std::ofstream f(tmp);
+    if (!f) fail("cannot write '", tmp.string(), "'");
+    f << "# Resolved configuration: every option with the value this run used.\n"
+      << out.c_str() << "\n";
+    if (!f) fail("cannot write '", tmp.string(), "'");
+  }
+  fs::rename(tmp, file);
+}
+
+namespace detail {
+
+std::string join_path(const std::string& prefix, const std::string& key) {
+  return prefix.empty() ? key : prefix + "." + key;
+}
+
+void type_error(const std::string& path, const YAML::Node& node, const char* expected) {
+  std::string got;
+  if (node.IsScalar()) got = "'" + node.Scalar() + "'";
+  else if (node.IsSequence()) got = "a list";
+  else if (node.IsMap()) got = "a section";
+  else got = "nothing";
+  fail("config key '", path, "' must be ", expected, ", got ", got);
+}
+
+bool scalar_to(const YAML::Node& node, bool& out) { return YAML::convert<bool>::decode(node, out); }
+bool scalar_to(const YAML::Node& node, int& out) { return YAML::convert<int>::decode(node, out); }
+bool scalar_to(const YAML::Node& node, int64_t& out) {
+  return YAML::convert<int64_t>::decode(node, out);
+}
+bool scalar_to(const YAML::Node& node, double& out) {
+  return YAML::convert<double>::decode(node, out);
+}
+bool scalar_to(const YAML::Node& node, float& out) { return YAML::convert<float>::decode(node, out); }
+bool scalar_to(const YAML::Node& node, std::string& out) {
+  out = node.Scalar();
+  return true;
+}
+
+}  // namespace detail
+}  // namespace th::config

@@ -1,0 +1,102 @@
+#include "core/runtime.hpp"
+
+#include <dlfcn.h>
+#include <spdlog/spdlog.h>
+#include <torch/cuda.h>
+#include <torch/utils.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <thread>
+#include <fstream>
+
+#include "core/error.hpp"
+
+namespace th::runtime {
+namespace {
+
+std::string loaded_library(const std::string& needle) {
+  std::ifstream maps("/proc/self/maps");
+  std::string line;
+  while (std::getline(maps, line)) {
+    const auto slash = line.find('/');
+    if (slash == std::string::npos) continue;
+    const std::string path = line.substr(slash);
+    if (std::filesystem::path(path).filename().string().find(needle) != std::string::npos)
+      return path;
+  }
+  return "";
+}
+
+template <class F>
+F find_symbol(const char* name) {
+  return reinterpret_cast<F>(dlsym(RTLD_DEFAULT, name));
+}
+
+}  // namespace
+
+BlasInfo detect_blas() {
+  BlasInfo info;
+  info.library = loaded_library("libblas.so");
+  if (info.library.empty()) info.library = loaded_library("blas");
+  std::error_code ec;
+  const std::string real = std::filesystem::canonical(info.library, ec).string();
+  if (!ec) info.library = real;
+
+  if (auto get_config = find_symbol<char* (*)()>("openblas_get_config")) {
+    info.name = "OpenBLAS";
+    info.details = get_config();
+    if (auto get_parallel = find_symbol<int (*)()>("openblas_get_parallel")) {
+      static const char* models[] = {"sequential", "pthreads", "OpenMP"};
+      const int p = get_parallel();
+      info.details += std::string(", threading: ") + (p >= 0 && p <= 2 ? models[p] : "?");
+    }
+  } else if (find_symbol<void*>("bli_info_get_version_str")) {
+    info.name = "BLIS";
+  } else if (find_symbol<void*>("mkl_get_version")) {
+    info.name = "MKL";
+  } else if (info.library.find("/blas/libblas.so") != std::string::npos) {
+    // Debian's netlib reference implementation, the fallback of the libblas.so.3 alternative.
+    info.name = "reference BLAS";
+    info.slow = true;
+  } else {
+    info.name = "unknown";
+  }
+  return info;
+}
+
+void log_blas() {
+  const BlasInfo b = detect_blas();
+  if (b.slow) {
+    spdlog::warn("!!! LibTorch is using the slow reference BLAS ({}): matrix products run 16-23x "
+                 "slower. Install OpenBLAS: apt-get install libopenblas0-pthread (or run "
+                 "scripts/install-deps.sh) !!!",
+                 b.library);
+  } else {
+    spdlog::info("BLAS: {} ({}){}", b.name, b.library.empty() ? "not loaded" : b.library,
+                 b.details.empty() ? "" : " [" + b.details + "]");
+  }
+}
+
+torch::Device select_device(const std::string& requested) {
+  const bool has_cuda = torch::cuda::is_available();
+  if (requested == "cpu") return torch::kCPU;
+  if (requested == "cuda") {
+    if (!has_cuda)
+      fail("device 'cuda' requested, but the linked LibTorch has no CUDA or no GPU is visible "
+           "(use --device cpu or auto)");
+    return torch::kCUDA;
+  }
+  if (requested == "auto") return has_cuda ? torch::Device(torch::kCUDA) : torch::Device(torch::kCPU);
+  fail("unknown device '", requested, "' (expected auto, cpu or cuda)");
+}
+
+int set_threads(int threads) {
+  // Debian's LibTorch starts with a single OpenMP thread when OMP_NUM_THREADS is unset, so
+  // "default" means one thread per core here.
+  if (threads <= 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  torch::set_num_threads(threads);
+  return torch::get_num_threads();
+}
+
+}  // namespace th::runtime

@@ -1,0 +1,44 @@
+#pragma once
+// .npy and .npz files as numpy writes them (SPEC 1.4).
+//
+// Numeric arrays map to tensors of the matching dtype: f4->Float, f8->Double, i4->Int,
+// i8->Long, u1->Byte, b1->Bool (little and big endian; C and Fortran order, always returned
+// C-contiguous). Object arrays ('|O', e.g. ZJU-MoCap's annots.npy, a dict saved with np.save)
+// hold a pickle and are read through read_npy_value.
+
+#include <torch/types.h>
+
+#include <filesystem>
+#include <map>
+#include <string>
+
+#include "io/pickle.hpp"
+
+namespace th::io {
+
+// A numeric .npy file. Throws th::Error naming the file for anything malformed, an object
+// array, an unsupported dtype or a shape whose byte count does not match the file size.
+torch::Tensor read_npy(const std::filesystem::path& path);
+// The same from bytes already in memory; `name` is used in error messages.
+torch::Tensor parse_npy(const std::string& bytes, const std::string& name);
+
+// Any .npy: numeric arrays come back as Value::array; object arrays are unpickled (a 0-d
+// object array, as np.save writes a dict, comes back as the object itself).
+Value read_npy_value(const std::filesystem::path& path);
+
+// Writes a numeric tensor (any supported dtype, any strides) as version 1.0, C order, little
+// endian, byte-identical to np.save. Written atomically (temporary file + rename).
+void write_npy(const std::filesystem::path& path, const torch::Tensor& array);
+std::string npy_bytes(const torch::Tensor& array);
+
+// Writes a Python object as np.save(path, obj, allow_pickle=True) does for a non-array object:
+// a 0-d object array whose data is a protocol-3 pickle. Byte-identical to numpy's output for
+// the subset Value holds. Atomic.
+void write_npy_value(const std::filesystem::path& path, const Value& object);
+
+// .npz archives (np.savez, stored, and np.savez_compressed, deflate). Keys without ".npy".
+std::map<std::string, torch::Tensor> read_npz(const std::filesystem::path& path);
+// Writes like np.savez (stored, no compression). Atomic.
+void write_npz(const std::filesystem::path& path, const std::map<std::string, torch::Tensor>& arrays);
+
+}  // namespace th::io

@@ -1,0 +1,129 @@
+#include <catch2/catch.hpp>
+
+#include <fstream>
+
+#include "core/config.hpp"
+#include "support/test_env.hpp"
+
+namespace fs = std::filesystem;
+using th::Config;
+using namespace th::config;
+
+namespace {
+
+fs::path write_file(const fs::path& dir, const std::string& name, const std::string& text) {
+  std::ofstream(dir / name) << text;
+  return dir / name;
+}
+
+// Every key path of a YAML map ("a.b.c").
+void collect_keys(const YAML::Node& node, const std::string& prefix, std::vector<std::string>& out) {
+  for (const auto& kv : node) {
+    const std::string key = prefix.empty() ? kv.first.as<std::string>()
+                                           : prefix + "." + kv.first.as<std::string>();
+    if (kv.second.IsMap()) collect_keys(kv.second, key, out);
+    else out.push_back(key);
+  }
+}
+
+std::string message_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const th::Error& e) {
+    return e.what();
+  }
+  return "<no error>";
+}
+
+}  // namespace
+
+TEST_CASE("default.yaml lists every option with the compiled-in defaults", "[config]") {
+  const YAML::Node file = YAML::LoadFile("configs/default.yaml");
+  const YAML::Node defaults = to_tree(Config{});
+  std::vector<std::string> file_keys, default_keys;
+  collect_keys(file, "", file_keys);
+  collect_keys(defaults, "", default_keys);
+  std::sort(file_keys.begin(), file_keys.end());
+  std::sort(default_keys.begin(), default_keys.end());
+  CHECK(file_keys == default_keys);
+  const Config loaded = load<Config>("configs/default.yaml");
+  CHECK(YAML::Dump(to_tree(loaded)) == YAML::Dump(defaults));
+}
+
+TEST_CASE("a child config inherits its parent and overrides win over both", "[config]") {
+  const fs::path dir = th::test::scratch_dir("config_inherit");
+  write_file(dir, "base.yaml", "train:\n  lr: 0.001\n  epochs: 10\n  warmup_epochs: 1\nmodel:\n  dparf:\n    nk: 3\n");
+  write_file(dir, "child.yaml", "parent: base.yaml\ntrain:\n  epochs: 20\n");
+  const Config c = load<Config>(dir / "child.yaml", {"model.dparf.nk=5", "data.ratio=0.25"});
+  CHECK(c.train.lr == Approx(0.001));
+  CHECK(c.train.epochs == 20);
+  CHECK(c.model.dparf.nk == 5);
+  CHECK(c.data.ratio == Approx(0.25));
+  CHECK(c.train.iters_per_epoch == 500);  // untouched default
+}
+
+TEST_CASE("a misspelt key fails naming the key and the likely intended one", "[config]") {
+  const fs::path dir = th::test::scratch_dir("config_typo");
+  write_file(dir, "typo.yaml", "train:\n  learning_rat: 0.1\n  lr: 0.1\nmodel:\n  dparf:\n    nkk: 3\n");
+  const std::string msg = message_of([&] { load<Config>(dir / "typo.yaml"); });
+  CHECK_THAT(msg, Catch::Contains("model.dparf.nkk") || Catch::Contains("train.learning_rat"));
+  const std::string msg2 = message_of([&] { load<Config>("configs/default.yaml", {"model.dparf.nkk=3"}); });
+  CHECK_THAT(msg2, Catch::Contains("unknown config key 'model.dparf.nkk'"));
+  CHECK_THAT(msg2, Catch::Contains("did you mean 'model.dparf.nk'"));
+}
+
+TEST_CASE("an override of an unknown key or section fails naming it", "[config]") {
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"trian.lr=1"}); }),
+             Catch::Contains("unknown config key 'trian'"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"train.lr.x=1"}); }),
+             Catch::Contains("'lr' is a value, not a section"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"train.lr"}); }),
+             Catch::Contains("must look like key.sub.key=value"));
+}
+
+TEST_CASE("a value of the wrong type fails naming key, expected type and value", "[config]") {
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"train.epochs=many"}); }),
+             Catch::Contains("config key 'train.epochs' must be an integer, got 'many'"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"train.epochs=2.5"}); }),
+             Catch::Contains("train.epochs"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"data.patch=3"}); }),
+             Catch::Contains("config key 'data.patch' must be a section"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"data.jitter.hue=0.5"}); }),
+             Catch::Contains("config key 'data.jitter.hue' must be a list"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"device=gpu"}); }),
+             Catch::Contains("'gpu' is not one of {auto, cpu, cuda}"));
+}
+
+TEST_CASE("incompatible switches are refused with a reason", "[config]") {
+  CHECK_THAT(message_of([] {
+               load<Config>("configs/default.yaml", {"model.fdi.appearance=false", "model.fdi.human=false"});
+             }),
+             Catch::Contains("at least one of the two branches"));
+  CHECK_THAT(message_of([] {
+               load<Config>("configs/default.yaml", {"model.grouping.kind=observation_grid"});
+             }),
+             Catch::Contains("transhe.position"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"model.dparf.nk=0"}); }),
+             Catch::Contains("model.dparf.nk"));
+}
+
+TEST_CASE("missing files and inheritance cycles are reported with the file name", "[config]") {
+  const fs::path dir = th::test::scratch_dir("config_cycle");
+  write_file(dir, "a.yaml", "parent: b.yaml\n");
+  write_file(dir, "b.yaml", "parent: a.yaml\n");
+  CHECK_THAT(message_of([&] { load<Config>(dir / "a.yaml"); }), Catch::Contains("inheritance cycle"));
+  CHECK_THAT(message_of([&] { load<Config>(dir / "nope.yaml"); }),
+             Catch::Contains("nope.yaml' does not exist"));
+  write_file(dir, "bad.yaml", "train: [1, 2\n");
+  CHECK_THAT(message_of([&] { load<Config>(dir / "bad.yaml"); }), Catch::Contains("YAML error at line"));
+}
+
+TEST_CASE("the resolved config written to disk loads back to the same values", "[config]") {
+  const fs::path dir = th::test::scratch_dir("config_resolved");
+  const Config c = load<Config>("configs/default.yaml", {"train.lr=0.123", "model.fdi.raw_rgb=false"});
+  write_yaml(dir / "config.yaml", to_tree(c));
+  const Config back = load<Config>(dir / "config.yaml");
+  CHECK(YAML::Dump(to_tree(back)) == YAML::Dump(to_tree(c)));
+  CHECK(back.train.lr == Approx(0.123));
+  CHECK_FALSE(back.model.fdi.raw_rgb);
+}

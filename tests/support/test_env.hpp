@@ -1,0 +1,32 @@
+#pragma once
+// Helpers shared by the test executables: scratch folders and the Python used for fixtures.
+
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+namespace th::test {
+
+// A fresh, empty folder under the build tree's test_tmp (TH_TEST_TMP), unique per name.
+inline std::filesystem::path scratch_dir(const std::string& name) {
+  const char* root = std::getenv("TH_TEST_TMP");
+  std::filesystem::path dir =
+      std::filesystem::path(root ? root : std::filesystem::temp_directory_path().string()) / name;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+// Debian's python3 (with python3-numpy, -torch, -skimage): tests run reference scripts with it.
+inline std::string python() {
+  const char* py = std::getenv("TH_PYTHON");
+  return (py && *py) ? py : "/usr/bin/python3";
+}
+
+// Runs `python3 <script> <args>` from the repository root; returns the exit status.
+inline int run_python(const std::string& script, const std::string& args) {
+  const std::string cmd = python() + " " + script + " " + args;
+  return std::system(cmd.c_str());
+}
+
+}  // namespace th::test
