@@ -67,6 +67,9 @@ struct TransHEConfig {
   int mlp_dim = 768;
   int pe_freqs = 32;
   double pe_scale = 1.5;           // Pc = mean(v_template[c]) / pe_scale
+  // float32 sin(x * f + phase): "separate" rounds product and sum (numpy); "fused" rounds once
+  // (PyTorch's addcmul with FMA, as the reference evaluated it on its hardware).
+  std::string pe_rounding = "separate";
 };
 
 struct DPaRFConfig {
@@ -95,6 +98,9 @@ struct ModelConfig {
   DPaRFConfig dparf;
   FDIConfig fdi;
   SPCConfig spc;
+  // SPEC 9 identities (per-level readouts of p_v, fc_0 on the tokens, folded linear layers);
+  // false: the reference's direct computation (slower; for checking).
+  bool exact_shortcuts = true;
 };
 
 // ---- rendering (SPEC 4) ------------------------------------------------------------------
@@ -195,6 +201,7 @@ template <class V> void visit_fields(V& v, TransHEConfig& c) {
   v("mlp_dim", c.mlp_dim);
   v("pe_freqs", c.pe_freqs);
   v("pe_scale", c.pe_scale);
+  v.choice("pe_rounding", c.pe_rounding, {"separate", "fused"});
 }
 template <class V> void visit_fields(V& v, DPaRFConfig& c) {
   v("nk", c.nk);
@@ -219,6 +226,7 @@ template <class V> void visit_fields(V& v, ModelConfig& c) {
   v("dparf", c.dparf);
   v("fdi", c.fdi);
   v("spc", c.spc);
+  v("exact_shortcuts", c.exact_shortcuts);
 }
 template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("samples", c.samples);

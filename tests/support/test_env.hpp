@@ -29,4 +29,13 @@ inline int run_python(const std::string& script, const std::string& args) {
   return std::system(cmd.c_str());
 }
 
+// The tiny synthetic dataset (configs/synth/tiny.yaml) that CTest's fixture test
+// `synth_tiny_dataset` generates before the tests that need it.
+// `exact`: the same people with fitting noise off (synth_tiny_exact).
+inline std::filesystem::path tiny_dataset(bool exact = false) {
+  const char* root = std::getenv("TH_TEST_TMP");
+  return std::filesystem::path(root ? root : "build/test_tmp") /
+         (exact ? "synth_tiny_exact" : "synth_tiny");
+}
+
 }  // namespace th::test

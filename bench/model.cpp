@@ -1,0 +1,378 @@
+// Model and renderer benchmark (SPEC 3, 4, 9): per-point throughput of DPaRF + FDI + heads at
+// several chunk sizes, one training step on the default ray batch, and one 512 x 512 frame
+// rendered progressively, for 64 and 16 samples per ray. Synthetic inputs (random images, a
+// humanoid point body of 6890 vertices, 300 tokens); random weights.
+//   transhuman-bench-model [--threads N] [--out FILE] [--quick]
+// Memory: peak resident set size of the process during the measured section, minus the
+// resident size before it (Linux VmHWM after resetting it through /proc/self/clear_refs).
+#include <CLI/CLI.hpp>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cmath>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include "core/runtime.hpp"
+#include "model/transhuman.hpp"
+#include "render/progressive.hpp"
+
+using namespace th;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+int64_t status_kb(const char* key) {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind(key, 0) == 0) return std::stoll(line.substr(std::strlen(key)));
+  return -1;
+}
+
+// Peak-RSS delta of a section.
+struct PeakMemory {
+  int64_t base_kb;
+  PeakMemory() {
+    std::ofstream("/proc/self/clear_refs") << "5";
+    base_kb = status_kb("VmRSS:");
+  }
+  double mib() const { return (status_kb("VmHWM:") - base_kb) / 1024.0; }
+};
+
+torch::Tensor rotation_y(double a) {
+  return torch::tensor({std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)}).view({3, 3});
+}
+
+// A humanoid of ellipsoid surfaces (metres, SMPL-like frame), nv points.
+torch::Tensor humanoid(int64_t nv) {
+  struct Part { double c[3], r[3], share; };
+  const Part parts[] = {{{0, 0.25, 0}, {0.17, 0.28, 0.11}, 0.3},  {{0, 0.68, 0}, {0.09, 0.12, 0.1}, 0.1},
+                        {{-0.1, -0.45, 0}, {0.08, 0.42, 0.08}, 0.15}, {{0.1, -0.45, 0}, {0.08, 0.42, 0.08}, 0.15},
+                        {{-0.33, 0.3, 0}, {0.22, 0.05, 0.05}, 0.15}, {{0.33, 0.3, 0}, {0.22, 0.05, 0.05}, 0.15}};
+  std::vector<torch::Tensor> out;
+  int64_t left = nv;
+  for (size_t i = 0; i < std::size(parts); ++i) {
+    const auto& p = parts[i];
+    const int64_t n = i + 1 == std::size(parts) ? left : static_cast<int64_t>(p.share * nv);
+    left -= n;
+    auto d = torch::randn({n, 3}, torch::kDouble);
+    d = d / d.norm(2, 1, true);
+    out.push_back(d * torch::tensor({p.r[0], p.r[1], p.r[2]}, torch::kDouble) +
+                  torch::tensor({p.c[0], p.c[1], p.c[2]}, torch::kDouble));
+  }
+  return torch::cat(out);
+}
+
+struct Scene {
+  model::FrameInputs in;
+  torch::Tensor K, R, T;  // target camera
+  int64_t size;
+};
+
+Scene make_scene(int64_t size, int64_t nv, int64_t nt) {
+  torch::manual_seed(0);
+  Scene s;
+  s.size = size;
+  auto& in = s.in;
+  in.canonical = humanoid(nv);
+  in.A = (torch::eye(3).expand({nv, 3, 3}) + 0.05 * torch::randn({nv, 3, 3})).contiguous();
+  in.Rh = rotation_y(0.4).to(torch::kFloat);
+  in.Th = torch::tensor({0.2f, 0.9f, -0.3f});
+  const auto xs = in.canonical.to(torch::kFloat) + 0.01 * torch::randn({nv, 3});
+  in.vertices = torch::mm(xs, in.Rh.t()) + in.Th;
+  // Voronoi clusters around farthest-point seeds: nt non-empty tokens.
+  std::vector<int64_t> seeds{0};
+  auto dmin = (in.canonical - in.canonical[0]).norm(2, 1);
+  for (int64_t i = 1; i < nt; ++i) {
+    const int64_t j = dmin.argmax().item<int64_t>();
+    seeds.push_back(j);
+    dmin = torch::minimum(dmin, (in.canonical - in.canonical[j]).norm(2, 1));
+  }
+  const auto seed_pts = in.canonical.index_select(0, torch::tensor(seeds));
+  in.labels = std::get<1>(torch::cdist(in.canonical, seed_pts).min(1));
+  in.num_tokens = nt;
+  const double f = size * 1.15;
+  const auto K = torch::tensor({f, 0.0, size / 2.0, 0.0, f, size / 2.0, 0.0, 0.0, 1.0}).view({3, 3}).to(torch::kFloat);
+  std::vector<torch::Tensor> Ks, Rs, Ts;
+  for (int v = 0; v < 4; ++v) {
+    const auto R = rotation_y(2 * M_PI * v / 4 + 0.3).to(torch::kFloat);
+    Ks.push_back(K);
+    Rs.push_back(R);
+    Ts.push_back((torch::tensor({0.0f, 0.0f, 3.5f}) - torch::mv(R, in.Th)).view({3, 1}));
+  }
+  in.K = torch::stack({Ks[0], Ks[1], Ks[2]});
+  in.R = torch::stack({Rs[0], Rs[1], Rs[2]});
+  in.T = torch::stack({Ts[0], Ts[1], Ts[2]});
+  s.K = Ks[3], s.R = Rs[3], s.T = Ts[3];
+  in.ref_images = torch::rand({3, 3, size, size});
+  in.visibility = torch::rand({3, nv}) < 0.6;
+  return s;
+}
+
+// All rays of the target view that meet the body's box (padded 0.05 m on z like SPEC 2.2).
+render::Rays box_rays(const Scene& s, torch::Tensor* pixel_index = nullptr) {
+  const auto n = s.size;
+  const auto grid = torch::meshgrid({torch::arange(n, torch::kFloat), torch::arange(n, torch::kFloat)}, "ij");
+  const auto pix = torch::stack({grid[1].flatten(), grid[0].flatten(), torch::ones({n * n})}, 1);
+  const auto d = torch::mm(torch::mm(pix, torch::inverse(s.K).t()), s.R);
+  const auto o = -torch::mv(s.R.t(), s.T.flatten());
+  const auto lo = std::get<0>(s.in.vertices.min(0)) - torch::tensor({0.0f, 0.0f, 0.05f});
+  const auto hi = std::get<0>(s.in.vertices.max(0)) + torch::tensor({0.0f, 0.0f, 0.05f});
+  const auto dd = torch::where(d.abs() < 1e-5, torch::full_like(d, 1e-5), d);
+  const auto t0 = (lo - o) / dd, t1 = (hi - o) / dd;
+  const auto tmin = std::get<0>(torch::minimum(t0, t1).max(1)), tmax = std::get<0>(torch::maximum(t0, t1).min(1));
+  const auto idx = ((tmax > tmin) & (tmin > 0)).nonzero().flatten();
+  if (pixel_index) *pixel_index = idx;
+  return {o.unsqueeze(0).expand({idx.size(0), 3}).contiguous(), d.index_select(0, idx), tmin.index_select(0, idx),
+          tmax.index_select(0, idx)};
+}
+
+// SPEC 5: 6 patches of 20 x 20 around random in-box pixels (clipped, overlapping allowed).
+render::Rays patch_rays(const Scene& s) {
+  torch::Tensor pix;
+  const auto all = box_rays(s, &pix);
+  auto is_valid = torch::full({s.size * s.size}, -1, torch::kLong);
+  is_valid.index_put_({pix}, torch::arange(pix.size(0)));
+  std::vector<torch::Tensor> rows;
+  for (int p = 0; p < 6; ++p) {
+    const int64_t c = pix[torch::randint(pix.size(0), {1}).item<int64_t>()].item<int64_t>();
+    const int64_t cy = c / s.size, cx = c % s.size;
+    for (int64_t y = std::max<int64_t>(cy - 10, 0); y < std::min(cy + 10, s.size); ++y) {
+      const auto seg = is_valid.slice(0, y * s.size + std::max<int64_t>(cx - 10, 0), y * s.size + std::min(cx + 10, s.size));
+      rows.push_back(seg.index_select(0, (seg >= 0).nonzero().flatten()));
+    }
+  }
+  return all.index(torch::cat(rows));
+}
+
+// Points the renderer evaluates: samples of in-box rays within the culling distance.
+torch::Tensor body_points(const Scene& s, const render::BodyDistance& body, int64_t count, torch::Tensor* dirs) {
+  auto rays = box_rays(s);
+  const auto z = render::sample_depths(rays.near, rays.far, 64, false);
+  auto pts = (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2)).reshape({-1, 3});
+  auto d = rays.directions.unsqueeze(1).expand({rays.size(), 64, 3}).reshape({-1, 3});
+  const auto keep = body.near(pts).nonzero().flatten();
+  const auto pick = keep.index_select(0, torch::randperm(keep.size(0)).narrow(0, 0, std::min(count, keep.size(0))));
+  // Keep ray order (renderer chunks hold consecutive samples of neighbouring rays).
+  const auto sorted = std::get<0>(pick.sort());
+  *dirs = d.index_select(0, sorted);
+  return pts.index_select(0, sorted);
+}
+
+struct Report {
+  std::ostringstream md;
+  void line(const std::string& s) {
+    std::cout << s << std::endl;
+    md << s << "\n";
+  }
+};
+
+std::string fmt(double v, int prec = 1) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(prec) << v;
+  return s.str();
+}
+
+void shares(Report& r, const render::Profile& p, double total) {
+  std::vector<std::pair<std::string, double>> v(p.seconds.begin(), p.seconds.end());
+  std::sort(v.begin(), v.end(), [](auto& a, auto& b) { return a.second > b.second; });
+  std::string s = "  time per stage: ";
+  for (const auto& [k, sec] : v) s += k + " " + fmt(100 * sec / total) + "% (" + fmt(sec, 2) + " s), ";
+  r.line(s.substr(0, s.size() - 2));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App cli{"TransHuman model and renderer benchmark"};
+  int threads = 0;
+  std::string out = "bench/results/model.md";
+  bool quick = false;
+  std::vector<int64_t> chunks{1024, 2048, 4096, 8192, 16384, 32768, 65536};
+  cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
+  cli.add_option("--out", out, "write the figures to this file (markdown)");
+  cli.add_option("--chunks", chunks, "chunk sizes for the per-point figures");
+  cli.add_flag("--quick", quick, "small image and fewer repetitions (smoke run)");
+  std::vector<std::string> sections{"points", "train", "render"};
+  cli.add_option("--sections", sections, "which parts to run: points train render");
+  CLI11_PARSE(cli, argc, argv);
+  const int nthreads = runtime::set_threads(threads);
+  const int64_t size = quick ? 128 : 512;
+
+  Report r;
+  r.line("# TransHuman model benchmark");
+  r.line("");
+  r.line("LibTorch " + std::string(TORCH_VERSION) + ", " + std::to_string(nthreads) + " threads, BLAS " +
+         runtime::detect_blas().name + "; synthetic frame: 3 reference views " + std::to_string(size) + "x" +
+         std::to_string(size) + ", 6890 body vertices, 300 tokens, default model (ViT depth 12), random weights.");
+  r.line("Memory: peak RSS delta of the measured section (VmHWM after reset via /proc/self/clear_refs, minus VmRSS before).");
+  r.line("");
+
+  const auto scene = make_scene(size, 6890, 300);
+  ModelConfig mc;
+  RenderConfig rc;
+  torch::manual_seed(1);
+  model::TransHuman net(mc, rc.cull_distance);
+  {
+    const auto counts = model::parameter_counts(*net);
+    std::string s = "Parameters: ";
+    for (const auto& c : counts) s += c.module + " " + std::to_string(c.count) + ", ";
+    r.line(s.substr(0, s.size() - 2));
+    r.line("");
+  }
+  // Densities around zero near the body, so that about half the points are coloured.
+  {
+    torch::NoGradGuard ng;
+    net->eval();
+    const auto cache = net->prepare(scene.in);
+    torch::Tensor d;
+    const auto pts = body_points(scene, *cache.body, 20000, &d);
+    const auto raw = net->forward(cache, pts, d);
+    net->heads->alpha_fc->bias.sub_(raw.select(1, 3).median());
+  }
+
+  auto wanted = [&](const char* s) { return std::find(sections.begin(), sections.end(), s) != sections.end(); };
+  // ---- per-point throughput -----------------------------------------------------------------
+  if (wanted("points")) {
+  r.line("## Per-point network (DPaRF + FDI + heads, 3 views), points within 0.1 m of the body");
+  r.line("");
+  r.line("| chunk | forward pts/s | density-first pts/s | fwd+bwd pts/s (graph kept) | training path pts/s (no-grad fwd + recompute + bwd) | peak MiB fwd+bwd |");
+  r.line("|---|---|---|---|---|---|");
+  {
+    net->train();
+    torch::Tensor dirs;
+    model::FrameCache cache_ng;
+    {
+      torch::NoGradGuard ng;
+      cache_ng = net->prepare(scene.in);
+    }
+    const int64_t total = quick ? 16384 : 65536;
+    const auto pts = body_points(scene, *cache_ng.body, total, &dirs);
+    const double min_time = quick ? 0.3 : 2.0;
+    for (const int64_t chunk : chunks) {
+      if (chunk > pts.size(0)) continue;
+      auto rate = [&](auto&& fn) {
+        int64_t done = 0;
+        fn(pts.narrow(0, 0, chunk), dirs.narrow(0, 0, chunk));  // warm-up
+        const auto t0 = Clock::now();
+        while (seconds_since(t0) < min_time)
+          for (int64_t b = 0; b + chunk <= pts.size(0) && (done == 0 || seconds_since(t0) < min_time); b += chunk) {
+            fn(pts.narrow(0, b, chunk), dirs.narrow(0, b, chunk));
+            done += chunk;
+          }
+        return done / seconds_since(t0);
+      };
+      double fwd, dfirst, fb, train;
+      {
+        torch::NoGradGuard ng;
+        fwd = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward(cache_ng, p, d); });
+        dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward_density_first(cache_ng, p, d); });
+      }
+      // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded).
+      model::FrameCache cache_g = cache_ng;
+      for (auto& [k, v] : cache_g.tensors)
+        if (v.is_floating_point() && k.rfind("cam.", 0) != 0 && k.rfind("body.", 0) != 0 && k != "app.image_table" &&
+            k != "human.origins" && k != "human.rotations")
+          v = v.detach().requires_grad_(true);
+      PeakMemory mem;
+      fb = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
+        const auto raw = net->forward(cache_g, p, d);
+        raw.backward(torch::ones_like(raw));
+      });
+      const double fb_mem = mem.mib();
+      model::FrameField field(*net, cache_g, chunk, true);
+      train = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
+        const auto raw = field.raw(p, d);
+        raw.backward(torch::ones_like(raw));
+      });
+      net->zero_grad();
+      r.line("| " + std::to_string(chunk) + " | " + fmt(fwd, 0) + " | " + fmt(dfirst, 0) + " | " + fmt(fb, 0) + " | " +
+             fmt(train, 0) + " | " + fmt(fb_mem, 0) + " |");
+    }
+    r.line("");
+    r.line("Forward: full colour for every point. Density-first: colour only where sigma > 0 (about half here).");
+    r.line("");
+  }
+  }
+
+  // ---- training step and rendering, 64 and 16 samples -----------------------------------------
+  for (const int samples : {64, 16}) {
+    RenderConfig rcs = rc;
+    rcs.samples = samples;
+    r.line("## " + std::to_string(samples) + " samples per ray");
+    r.line("");
+    if (wanted("train")) {
+      net->train();
+      torch::manual_seed(2);
+      const auto rays = patch_rays(scene);
+      torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(7e-4));
+      auto step = [&](render::Profile* prof) {
+        net->set_profile(prof);
+        render::ScopedTimer t(prof, "total");
+        const auto cache = net->prepare(scene.in);
+        model::FrameField field(*net, cache, rcs.chunk_points, true);
+        const auto img = render::VolumeRenderer(rcs, prof).render(field, rays, true);
+        const auto loss = (img.rgb - 0.5).pow(2).mean();
+        adam.zero_grad();
+        {
+          render::ScopedTimer tb(prof, "backward (incl. recompute)");
+          loss.backward();
+        }
+        adam.step();
+        net->set_profile(nullptr);
+      };
+      step(nullptr);  // warm-up
+      render::Profile prof;
+      PeakMemory mem;
+      const auto t0 = Clock::now();
+      const int reps = quick ? 1 : 2;
+      for (int i = 0; i < reps; ++i) step(&prof);
+      const double sec = seconds_since(t0) / reps;
+      for (auto& [k, v] : prof.seconds) v /= reps;
+      r.line("Training step (" + std::to_string(rays.size()) + " rays x " + std::to_string(samples) +
+             " samples = " + std::to_string(rays.size() * samples) + " points, chunk " +
+             std::to_string(rcs.chunk_points) + ", checkpointed): " + fmt(sec, 2) + " s, peak memory " +
+             fmt(mem.mib(), 0) + " MiB, " + fmt(rays.size() * samples / sec, 0) + " points/s end to end");
+      prof.seconds.erase("total");
+      shares(r, prof, sec);
+      r.line("");
+    }
+    if (wanted("render")) {
+      net->eval();
+      const auto rays = box_rays(scene);
+      render::Profile prof;
+      PeakMemory mem;
+      const auto t0 = Clock::now();
+      render::RenderResult img;
+      {
+        torch::NoGradGuard ng;
+        net->set_profile(&prof);
+        const auto cache = net->prepare(scene.in);
+        model::FrameField field(*net, cache, rcs.chunk_points, false);
+        img = render::render_progressive(field, *cache.body, rays, rcs, &prof);
+        net->set_profile(nullptr);
+      }
+      const double sec = seconds_since(t0);
+      const auto& st = img.stats;
+      r.line("Render " + std::to_string(size) + "x" + std::to_string(size) + " (progressive, chunk " +
+             std::to_string(rcs.chunk_points) + "): " + fmt(sec, 2) + " s, peak memory " + fmt(mem.mib(), 0) +
+             " MiB; " + std::to_string(st.rays) + " in-box rays, " + std::to_string(st.points) + " samples, " +
+             std::to_string(st.culled_points) + " culled (" + fmt(100.0 * st.culled_points / std::max<int64_t>(st.points, 1)) +
+             "%), " + std::to_string(st.density_points) + " density, " + std::to_string(st.color_points) + " colour, " +
+             std::to_string(st.empty_rays) + " empty rays; " + fmt(st.density_points / sec, 0) + " kept points/s end to end");
+      shares(r, prof, sec);
+      r.line("");
+    }
+  }
+  if (!out.empty()) {
+    std::ofstream f(out);
+    f << r.md.str();
+    std::cout << "written to " << out << std::endl;
+  }
+  return 0;
+}

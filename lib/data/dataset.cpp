@@ -1,0 +1,262 @@
+#include "data/dataset.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <chrono>
+#include <numeric>
+#include <random>
+
+#include "body/smpl.hpp"
+#include "body/visibility.hpp"
+#include "core/error.hpp"
+#include "data/h36m.hpp"
+#include "data/rays.hpp"
+#include "geometry/camera.hpp"
+
+namespace th::data {
+namespace fs = std::filesystem;
+using torch::indexing::Slice;
+
+namespace {
+
+torch::Tensor image_tensor(const cv::Mat& rgb) {  // CV_32FC3 -> (H, W, 3) float32
+  return torch::from_blob(rgb.data, {rgb.rows, rgb.cols, 3}, torch::kFloat32).clone();
+}
+
+torch::Tensor mask_tensor(const cv::Mat& mask) {  // CV_8U -> (H, W) uint8
+  return torch::from_blob(mask.data, {mask.rows, mask.cols}, torch::kUInt8).clone();
+}
+
+torch::Tensor f32(const torch::Tensor& t) { return t.to(torch::kFloat32).contiguous(); }
+
+}  // namespace
+
+std::shared_ptr<const body::SmplModel> load_body_model(const DataConfig& config) {
+  const fs::path path = config.smpl_model.empty() ? fs::path(config.root) / "smpl_model.npz"
+                                                  : fs::path(config.smpl_model);
+  if (!fs::exists(path))
+    fail("body model '", path.string(), "' does not exist (set data.smpl_model to SMPL's .pkl or "
+         "an .npz; transhuman-synth writes <root>/smpl_model.npz)");
+  return std::make_shared<const body::SmplModel>(body::load_smpl(path));
+}
+
+Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode,
+                 std::shared_ptr<const body::SmplModel> smpl)
+    : config_(config), setting_(load_split(config.split_file, setting)), mode_(mode),
+      smpl_(std::move(smpl)) {
+  TORCH_CHECK(smpl_, "Dataset needs a body model");
+  if (!fs::is_directory(config.root))
+    fail("data.root '", config.root, "' does not exist", config.dataset == "synthetic"
+         ? " (make it with: transhuman-synth --out " + config.root + ")" : "");
+  for (const auto& range : setting_.humans) {
+    auto human = HumanSequence::open(human_folder(config.root, range.name));
+    const int h = int(humans_.size());
+    auto check_view = [&](int v, const char* what) {
+      if (v < 0 || v >= human->num_cameras())
+        fail("split '", setting, "': ", what, " view ", v, " does not exist for ", range.name,
+             " (", human->num_cameras(), " cameras)");
+    };
+    for (int v : setting_.reference_views) check_view(v, "reference");
+    for (int v : setting_.target_views) check_view(v, "target");
+    if (setting_.random_references && setting_.num_reference_views > human->num_cameras())
+      fail("split '", setting, "': ", setting_.num_reference_views, " random references but ",
+           range.name, " has ", human->num_cameras(), " cameras");
+    std::vector<int> targets = setting_.target_views;
+    if (setting_.all_targets) {
+      targets.resize(human->num_cameras());
+      std::iota(targets.begin(), targets.end(), 0);
+    }
+    for (int frame : range.frames(human->num_frames()))
+      for (int t : targets) items_.push_back({h, frame, t});
+    humans_.push_back(std::move(human));
+  }
+  spdlog::info("dataset: {} '{}' — {} humans, {} samples", config.dataset, setting, humans_.size(),
+               items_.size());
+}
+
+FrameBody Dataset::load_body(const HumanSequence& human, int frame) const {
+  const BodyParams params = human.load_params(frame);
+  const torch::Tensor vertices = human.load_vertices(frame);
+  if (vertices.size(0) != smpl_->num_vertices())
+    fail(human.name(), " frame ", frame, ": the vertices file has ", vertices.size(0),
+         " vertices but the body model has ", smpl_->num_vertices(),
+         " (is data.smpl_model the model these fits were made with?)");
+  const auto lbs = body::lbs(*smpl_, params.poses, params.shapes);
+  FrameBody b;
+  b.Rh = geometry::rodrigues(params.Rh);
+  b.Th = params.Th;
+  b.vertices = vertices;
+  b.smpl_vertices = (vertices - params.Th.reshape({1, 3})).matmul(b.Rh);  // Rh^T (x - Th)
+  b.A = lbs.A.index({Slice(), Slice(0, 3), Slice(0, 3)});
+  b.bounds = bounds_of(vertices, config_.box_padding);
+  for (auto* t : {&b.vertices, &b.smpl_vertices, &b.Rh, &b.Th, &b.A, &b.bounds}) *t = f32(*t);
+  return b;
+}
+
+Sample Dataset::load(size_t index, uint64_t seed) const {
+  const Item& it = item(index);
+  const HumanSequence& human = *humans_[it.human];
+  std::mt19937_64 rng(seed);
+  const bool train = mode_ == Mode::Train;
+
+  Sample s;
+  s.human = human.name();
+  s.frame = it.frame;
+  s.target_view = it.target_view;
+  if (setting_.random_references) {  // any cameras, the target included (SPEC 1.2)
+    std::vector<int> all(human.num_cameras());
+    std::iota(all.begin(), all.end(), 0);
+    std::shuffle(all.begin(), all.end(), rng);
+    s.reference_views.assign(all.begin(), all.begin() + setting_.num_reference_views);
+  } else {
+    s.reference_views = setting_.reference_views;
+  }
+  JitterParams jitter;
+  const bool jittered = train && config_.jitter.enabled;
+  if (jittered) jitter = sample_jitter(config_.jitter, rng);
+
+  // Reference views.
+  std::vector<torch::Tensor> images, Ks, Rs, Ts, vis;
+  s.body = load_body(human, it.frame);
+  const auto faces = smpl_->faces;
+  for (int v : s.reference_views) {
+    const ViewImage view =
+        load_view(human, it.frame, v, {config_.ratio, false, jittered ? &jitter : nullptr});
+    images.push_back(image_tensor(view.rgb).permute({2, 0, 1}));
+    Ks.push_back(view.camera.K);
+    Rs.push_back(view.camera.R);
+    Ts.push_back(view.camera.T);
+    if (config_.visibility == "files") {
+      const fs::path img = fs::relative(human.image_path(it.frame, v), human.dir());
+      const fs::path file = fs::path(config_.visibility_root) / human.name() / "visibility" /
+                            img.parent_path() / (img.stem().string() + ".npy");
+      vis.push_back(body::load_visibility_file(file, smpl_->num_vertices()));
+    } else {
+      vis.push_back(body::vertex_visibility(s.body.vertices, faces, view.camera.K, view.camera.R,
+                                            view.camera.T, view.rgb.cols, view.rgb.rows));
+    }
+  }
+  s.ref_images = torch::stack(images).contiguous();
+  s.ref_K = f32(torch::stack(Ks));
+  s.ref_R = f32(torch::stack(Rs));
+  s.ref_T = f32(torch::stack(Ts));
+  s.visibility = torch::stack(vis);
+
+  // Target view.
+  const ViewImage target =
+      load_view(human, it.frame, it.target_view, {config_.ratio, true, jittered ? &jitter : nullptr});
+  const int W = target.rgb.cols, H = target.rgb.rows;
+  s.target_image = image_tensor(target.rgb);
+  s.target_mask = mask_tensor(target.mask);
+  s.K = f32(target.camera.K);
+  s.R = f32(target.camera.R);
+  s.T = f32(target.camera.T);
+  const auto& cam = target.camera;
+  const auto box = s.body.bounds.to(torch::kFloat64);
+
+  torch::Tensor pixels;  // (N, 2) x, y
+  if (train) {
+    const cv::Mat bmask = box_mask(box, cam.K, cam.R, cam.T, W, H);
+    const cv::Mat person = target.mask == 1;
+    const auto& p = config_.patch;
+    const auto patches = sample_patches(person / 255, bmask, p.count, p.size, p.body_prob, rng);
+    s.patch_rgb = torch::zeros({int64_t(patches.size()), 3, p.size, p.size}, torch::kFloat32);
+    std::vector<torch::Tensor> px, slot;
+    for (size_t i = 0; i < patches.size(); ++i) {
+      const Patch& q = patches[i];
+      s.patch_rgb[i].index_put_({Slice(), Slice(0, q.height), Slice(0, q.width)},
+                                s.target_image.index({Slice(q.y0, q.y0 + q.height), Slice(q.x0, q.x0 + q.width)})
+                                    .permute({2, 0, 1}));
+      auto local = pixel_grid(q.width, q.height);
+      px.push_back(local + torch::tensor({q.x0, q.y0}, torch::kInt64));
+      slot.push_back(int64_t(i) * p.size * p.size + local.select(1, 1) * p.size + local.select(1, 0));
+    }
+    pixels = torch::cat(px);
+    s.ray_patch_index = torch::cat(slot);
+  } else {
+    pixels = pixel_grid(W, H);
+  }
+  const auto rays = pixel_rays(pixels, cam.K, cam.R, cam.T);
+  const auto nf = near_far(rays.origins, rays.dirs, box);
+  const auto valid = nf.valid;
+  if (!train) s.box_mask = valid.reshape({H, W});
+  s.ray_o = f32(rays.origins.index({valid}));
+  s.ray_d = f32(rays.dirs.index({valid}));
+  s.near = f32(nf.near.index({valid}));
+  s.far = f32(nf.far.index({valid}));
+  const auto vp = pixels.index({valid});
+  s.ray_pixel = vp.select(1, 1) * W + vp.select(1, 0);
+  s.ray_rgb = s.target_image.reshape({-1, 3}).index({s.ray_pixel});
+  if (train) s.ray_patch_index = s.ray_patch_index.index({valid});
+  return s;
+}
+
+// ---- Prefetcher ---------------------------------------------------------------------------
+
+Prefetcher::Prefetcher(std::shared_ptr<const Dataset> dataset, std::vector<size_t> order,
+                       std::vector<uint64_t> seeds, int workers, int depth)
+    : dataset_(std::move(dataset)), order_(std::move(order)), seeds_(std::move(seeds)),
+      depth_(std::max(1, depth)) {
+  TORCH_CHECK(order_.size() == seeds_.size(), "Prefetcher: one seed per sample");
+  for (int i = 0; i < workers; ++i) threads_.emplace_back([this] { work(); });
+}
+
+Prefetcher::~Prefetcher() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  for (auto& t : threads_) t.join();
+}
+
+void Prefetcher::work() {
+  for (;;) {
+    size_t pos;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait(lock, [&] { return stop_ || (claimed_ < order_.size() && claimed_ < next_ + depth_); });
+      if (stop_ || claimed_ >= order_.size()) return;
+      pos = claimed_++;
+    }
+    Sample sample;
+    std::exception_ptr error;
+    try {
+      sample = dataset_->load(order_[pos], seeds_[pos]);
+    } catch (...) {
+      error = std::current_exception();
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (error) errors_[pos] = error;
+      else ready_.emplace(pos, std::move(sample));
+    }
+    cv_.notify_all();
+  }
+}
+
+Sample Prefetcher::next() {
+  TORCH_CHECK(!done(), "Prefetcher: no samples left");
+  const size_t pos = next_;
+  if (threads_.empty()) {
+    ++next_;
+    return dataset_->load(order_[pos], seeds_[pos]);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  std::unique_lock<std::mutex> lock(mutex_);
+  cv_.wait(lock, [&] { return ready_.count(pos) || errors_.count(pos); });
+  wait_seconds_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ++next_;
+  cv_.notify_all();
+  if (auto e = errors_.find(pos); e != errors_.end()) {
+    auto error = e->second;
+    errors_.erase(e);
+    std::rethrow_exception(error);
+  }
+  Sample s = std::move(ready_.at(pos));
+  ready_.erase(pos);
+  return s;
+}
+
+}  // namespace th::data

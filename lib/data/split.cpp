@@ -1,0 +1,97 @@
+#include "data/split.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include "core/error.hpp"
+
+namespace th::data {
+namespace {
+
+YAML::Node load_settings(const std::filesystem::path& file) {
+  if (!std::filesystem::is_regular_file(file)) fail("split file '", file.string(), "' does not exist");
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(file.string());
+  } catch (const YAML::Exception& e) {
+    fail("split file '", file.string(), "': YAML error at line ", e.mark.line + 1, ": ", e.msg);
+  }
+  if (!root["settings"] || !root["settings"].IsMap())
+    fail("split file '", file.string(), "' has no 'settings' map");
+  return root["settings"];
+}
+
+template <class T>
+T get(const YAML::Node& node, const char* key, const std::string& where) {
+  if (!node[key]) fail(where, ": missing '", key, "'");
+  try {
+    return node[key].as<T>();
+  } catch (const YAML::Exception&) {
+    fail(where, ": '", key, "' has the wrong type");
+  }
+}
+
+// A view list: [i, ...] or the keyword (`random` / `all`).
+bool read_views(const YAML::Node& node, const char* key, const char* keyword,
+                std::vector<int>& views, const std::string& where) {
+  const YAML::Node v = node[key];
+  if (!v) fail(where, ": missing '", key, "'");
+  if (v.IsScalar() && v.Scalar() == keyword) return true;
+  if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of camera indices or '", keyword, "'");
+  views = v.as<std::vector<int>>();
+  return false;
+}
+
+}  // namespace
+
+std::vector<int> HumanRange::frames(int num_frames) const {
+  std::vector<int> out;
+  const int end = std::min(begin + ni, num_frames);
+  for (int f = begin; f < end; f += interval) out.push_back(f);
+  return out;
+}
+
+std::vector<std::string> split_settings(const std::filesystem::path& file) {
+  std::vector<std::string> names;
+  for (const auto& kv : load_settings(file)) names.push_back(kv.first.as<std::string>());
+  return names;
+}
+
+SplitSetting load_split(const std::filesystem::path& file, const std::string& name) {
+  const YAML::Node settings = load_settings(file);
+  const YAML::Node node = settings[name];
+  if (!node) {
+    std::string known;
+    for (const auto& kv : settings) known += (known.empty() ? "" : ", ") + kv.first.as<std::string>();
+    fail("split file '", file.string(), "' has no setting '", name, "' (it has: ", known, ")");
+  }
+  const std::string where = "split file '" + file.string() + "', setting '" + name + "'";
+  SplitSetting s;
+  s.name = name;
+  s.random_references = read_views(node, "reference_views", "random", s.reference_views, where);
+  if (s.random_references) s.num_reference_views = get<int>(node, "num_reference_views", where);
+  s.all_targets = read_views(node, "target_views", "all", s.target_views, where);
+
+  if (node["humans_from"]) {
+    const auto base = load_split(file, node["humans_from"].as<std::string>());
+    s.humans = base.humans;
+    if (node["interval"])
+      for (auto& h : s.humans) h.interval = get<int>(node, "interval", where);
+  } else {
+    const YAML::Node humans = node["humans"];
+    if (!humans || !humans.IsSequence() || humans.size() == 0)
+      fail(where, ": 'humans' must be a non-empty list");
+    for (size_t i = 0; i < humans.size(); ++i) {
+      const std::string w = where + ", humans[" + std::to_string(i) + "]";
+      HumanRange h{get<std::string>(humans[i], "name", w), get<int>(humans[i], "begin", w),
+                   get<int>(humans[i], "ni", w), get<int>(humans[i], "interval", w)};
+      if (h.begin < 0 || h.ni <= 0 || h.interval <= 0)
+        fail(w, ": begin must be >= 0, ni and interval > 0");
+      s.humans.push_back(h);
+    }
+  }
+  if (!s.random_references && s.reference_views.empty()) fail(where, ": no reference views");
+  if (!s.all_targets && s.target_views.empty()) fail(where, ": no target views");
+  return s;
+}
+
+}  // namespace th::data

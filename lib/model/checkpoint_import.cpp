@@ -1,0 +1,204 @@
+#include "model/checkpoint_import.hpp"
+
+#include <caffe2/serialize/inline_container.h>
+#include <torch/torch.h>
+
+#include <unordered_map>
+
+#include "core/error.hpp"
+#include "io/npy.hpp"
+#include "io/pickle.hpp"
+#include "model/transhuman.hpp"
+
+namespace th::model {
+namespace {
+
+using io::Value;
+
+torch::ScalarType storage_dtype(const std::string& cls, const std::string& source) {
+  static const std::unordered_map<std::string, torch::ScalarType> types = {
+      {"torch.FloatStorage", torch::kFloat},   {"torch.DoubleStorage", torch::kDouble},
+      {"torch.HalfStorage", torch::kHalf},     {"torch.BFloat16Storage", torch::kBFloat16},
+      {"torch.LongStorage", torch::kLong},     {"torch.IntStorage", torch::kInt},
+      {"torch.ShortStorage", torch::kShort},   {"torch.CharStorage", torch::kChar},
+      {"torch.ByteStorage", torch::kByte},     {"torch.BoolStorage", torch::kBool},
+  };
+  const auto it = types.find(cls);
+  if (it == types.end()) fail(source, ": unsupported storage type '", cls, "'");
+  return it->second;
+}
+
+void flatten(const Value& v, const std::string& prefix, std::map<std::string, torch::Tensor>& out) {
+  const auto kind = v.kind();
+  if (kind == Value::Kind::Array || kind == Value::Kind::Int || kind == Value::Kind::Float ||
+      kind == Value::Kind::Bool) {
+    out[prefix] = v.as_tensor();
+  } else if (v.kind() == Value::Kind::Dict) {
+    for (const auto& [k, item] : v.as_dict())
+      if (k.kind() == Value::Kind::Str || k.kind() == Value::Kind::Bytes)
+        flatten(item, prefix.empty() ? k.as_str() : prefix + "." + k.as_str(), out);
+  }
+}
+
+// Reference names of the parts this model has (SPEC 8).
+const std::vector<std::pair<std::string, std::string>>& renames() {
+  static const std::vector<std::pair<std::string, std::string>> r = {
+      {"human.ViT.", "ViT."},
+      {"human.fc_0.", "fc_0."},
+      {"fdi.key0.", "spatial_key_value_0.key_embed."},
+      {"fdi.value0.", "spatial_key_value_0.value_embed."},
+      {"fdi.key1.", "spatial_key_value_1.key_embed."},
+      {"fdi.value1.", "spatial_key_value_1.value_embed."},
+      {"fdi.", ""},
+      {"heads.", ""},
+      {"encoder.", "encoder."},
+  };
+  return r;
+}
+
+}  // namespace
+
+std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
+                                                          const std::string& entry) {
+  const std::string source = path.string();
+  if (!std::filesystem::exists(path)) fail("checkpoint '", source, "' does not exist");
+  std::unique_ptr<caffe2::serialize::PyTorchStreamReader> reader;
+  try {
+    reader = std::make_unique<caffe2::serialize::PyTorchStreamReader>(source);
+  } catch (const c10::Error& e) {
+    fail(source, ": not a PyTorch zip checkpoint (", e.what_without_backtrace(), ")");
+  }
+  if (!reader->hasRecord("data.pkl")) fail(source, ": no data.pkl record (not a torch.save file)");
+  const auto [pkl, pkl_size] = reader->getRecord("data.pkl");
+  std::map<std::string, torch::Tensor> storages;
+
+  io::PickleExtensions ext;
+  ext.ignore_dict_state = true;  // OrderedDict._metadata of state dicts
+  ext.persistent_load = [&](const Value& pid) -> Value {
+    // ('storage', storage type, key, location, numel)
+    const auto& t = pid.as_list();
+    if (t.size() < 5 || t[0].as_str() != "storage") fail(source, ": unexpected persistent id ", pid.type_name());
+    const auto dtype = storage_dtype(t[1].as_object().cls, source);
+    const std::string key = t[2].as_str();
+    const int64_t numel = t[4].as_int();
+    auto it = storages.find(key);
+    if (it == storages.end()) {
+      const std::string record = "data/" + key;
+      if (!reader->hasRecord(record)) fail(source, ": missing storage record '", record, "'");
+      const auto [data, size] = reader->getRecord(record);
+      const int64_t itemsize = static_cast<int64_t>(c10::elementSize(dtype));
+      if (static_cast<int64_t>(size) != numel * itemsize)
+        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel * itemsize);
+      auto tensor = torch::empty({numel}, dtype);
+      std::memcpy(tensor.data_ptr(), data.get(), size);
+      it = storages.emplace(key, tensor).first;
+    }
+    return Value::array(it->second);
+  };
+  auto rebuild = [&](const Value::List& a) -> Value {
+    // _rebuild_tensor_v2(storage, offset, size, stride, requires_grad, hooks[, metadata])
+    if (a.size() < 4) fail(source, ": _rebuild_tensor with ", a.size(), " arguments");
+    const auto storage = a[0].as_tensor();
+    const int64_t offset = a[1].as_int();
+    std::vector<int64_t> size, stride;
+    for (const auto& s : a[2].as_list()) size.push_back(s.as_int());
+    for (const auto& s : a[3].as_list()) stride.push_back(s.as_int());
+    int64_t last = offset;
+    for (size_t d = 0; d < size.size(); ++d) last += (size[d] - 1) * stride[d];
+    if (offset < 0 || (!size.empty() && last >= storage.numel() && storage.numel() > 0))
+      fail(source, ": tensor view of ", c10::IntArrayRef(size), " at offset ", offset,
+           " exceeds its storage of ", storage.numel(), " elements");
+    return Value::array(storage.as_strided(size, stride, offset).clone());
+  };
+  ext.globals["torch._utils._rebuild_tensor_v2"] = rebuild;
+  ext.globals["torch._utils._rebuild_tensor"] = rebuild;
+  ext.globals["torch._utils._rebuild_parameter"] = [](const Value::List& a) { return a.at(0); };
+  ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
+  for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
+                        "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage"})
+    ext.globals[std::string("torch.") + s] = nullptr;
+
+  const Value root = io::parse_pickle(std::string_view(static_cast<const char*>(pkl.get()), pkl_size),
+                                      source + ":data.pkl", ext);
+  const Value* net = root.kind() == Value::Kind::Dict ? root.find(entry) : nullptr;
+  std::map<std::string, torch::Tensor> out;
+  flatten(net ? *net : root, "", out);
+  if (out.empty()) fail(source, ": no tensors found", net ? " under '" + entry + "'" : std::string());
+  return out;
+}
+
+std::string reference_name(const std::string& name) {
+  for (const auto& [ours, theirs] : renames())
+    if (name.rfind(ours, 0) == 0) return theirs + name.substr(ours.size());
+  return name;
+}
+
+ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
+                                    const std::string& source) {
+  if (model.config().representation != "transhuman")
+    fail(source, ": reference checkpoints hold the TransHuman representation, not '",
+         model.config().representation, "'");
+  // Check everything first, then copy.
+  std::vector<std::pair<torch::Tensor, torch::Tensor>> copies;
+  ImportReport report;
+  std::set<std::string> used;
+  auto visit = [&](const std::string& name, torch::Tensor& dst) {
+    const std::string ref = reference_name(name);
+    const auto it = state.find(ref);
+    if (it == state.end()) {
+      if (ref.find("num_batches_tracked") != std::string::npos) return;  // optional buffer
+      fail(source, ": missing key '", ref, "' (for ", name, ")");
+    }
+    auto src = it->second;
+    if (src.dim() == 3 && src.size(2) == 1 && dst.dim() == 2) src = src.squeeze(2);  // Conv1d k=1
+    if (src.sizes() != dst.sizes())
+      fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ", dst.sizes());
+    copies.emplace_back(dst, src);
+    used.insert(ref);
+    report.loaded.push_back(ref);
+  };
+  for (auto& p : model.named_parameters()) visit(p.key(), p.value());
+  for (auto& b : model.named_buffers()) visit(b.key(), b.value());
+  torch::NoGradGuard no_grad;
+  for (auto& [dst, src] : copies) dst.copy_(src.to(dst.dtype()));
+  for (const auto& [k, v] : state)
+    if (!used.count(k)) report.ignored.push_back(k);
+  return report;
+}
+
+ImportReport import_reference_checkpoint(TransHumanImpl& model, const std::filesystem::path& path) {
+  return import_reference_state(model, read_torch_state_dict(path, "net"), path.string());
+}
+
+void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz) {
+  encoder.load_resnet_state(io::read_npz(npz), npz.string());
+}
+
+void save_model_weights(const TransHumanImpl& model, const std::filesystem::path& path) {
+  torch::serialize::OutputArchive archive;
+  for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
+  for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
+  archive.save_to(path.string());
+}
+
+void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path) {
+  if (!std::filesystem::exists(path)) fail("model weights '", path.string(), "' do not exist");
+  torch::serialize::InputArchive archive;
+  try {
+    archive.load_from(path.string());
+  } catch (const c10::Error& e) {
+    fail(path.string(), ": cannot read model weights (", e.what_without_backtrace(), ")");
+  }
+  torch::NoGradGuard no_grad;
+  auto read = [&](const std::string& name, torch::Tensor& dst, bool buffer) {
+    torch::Tensor t;
+    if (!archive.try_read(name, t, buffer)) fail(path.string(), ": missing tensor '", name, "'");
+    if (t.sizes() != dst.sizes())
+      fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ", dst.sizes());
+    dst.copy_(t);
+  };
+  for (auto& p : model.named_parameters()) read(p.key(), p.value(), false);
+  for (auto& b : model.named_buffers()) read(b.key(), b.value(), true);
+}
+
+}  // namespace th::model

@@ -1,0 +1,50 @@
+#pragma once
+// Weights from files (SPEC 8): checkpoints of the reference implementation (.pth, PyTorch's
+// zip format: data.pkl + data/<storage> records), ImageNet ResNet-18 weights converted by
+// scripts/export_pretrained.py, and this project's own model weights.
+
+#include <torch/types.h>
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace th::model {
+
+class TransHumanImpl;
+class EncoderImpl;
+
+// The tensors of a PyTorch zip checkpoint. The pickle is read by the project's safe reader
+// (io/pickle.hpp) with PyTorch's storages (persistent ids), torch._utils._rebuild_tensor_v2,
+// collections.OrderedDict/Counter; nothing is executed. `entry`: the dict key holding the state
+// dict ("net" for the reference's checkpoints); a file holding the state dict itself works too.
+// Nested dicts are flattened with '.' like a state dict (numbers become 0-d tensors). Throws
+// th::Error naming the file.
+std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
+                                                          const std::string& entry = "net");
+
+struct ImportReport {
+  std::vector<std::string> loaded;   // reference names copied into the model
+  std::vector<std::string> ignored;  // present in the file, unused by the model
+};
+
+// The reference name of each model parameter/buffer (SPEC 8), e.g. "fdi.key0.weight" ->
+// "spatial_key_value_0.key_embed.weight"; Conv1d weights (out, in, 1) become Linear (out, in).
+std::string reference_name(const std::string& model_name);
+
+// Copies a reference state dict into the model. Throws th::Error naming the first missing or
+// mis-shaped key (and the source); nothing is modified then.
+ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
+                                    const std::string& source);
+ImportReport import_reference_checkpoint(TransHumanImpl& model, const std::filesystem::path& path);
+
+// ImageNet ResNet-18 weights: an .npz with torchvision's resnet18 state dict names, written by
+// scripts/export_pretrained.py. Throws th::Error naming a missing or mis-shaped key.
+void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz);
+
+// This project's model weights (parameters and buffers by name, torch::serialize archive).
+void save_model_weights(const TransHumanImpl& model, const std::filesystem::path& path);
+void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path);
+
+}  // namespace th::model

@@ -1,0 +1,80 @@
+#include "model/dparf.hpp"
+
+#include <torch/torch.h>
+
+#include "model/positional_encoding.hpp"
+#include "model/transhe.hpp"
+
+namespace th::model {
+
+TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& A,
+                         const torch::Tensor& labels, int64_t num_tokens) {
+  TORCH_CHECK(xs_vertices.dim() == 2 && xs_vertices.size(1) == 3, "xs_vertices must be (Nv, 3)");
+  TORCH_CHECK(A.dim() == 3 && A.size(0) == xs_vertices.size(0), "A must be (Nv, 3, 3)");
+  TokenFrames f;
+  f.origins = cluster_mean(xs_vertices, labels, num_tokens);
+  f.rotations = cluster_mean(A.reshape({-1, 9}), labels, num_tokens).view({num_tokens, 3, 3});
+  return f;
+}
+
+DPaRF::DPaRF(const DPaRFConfig& config) : config_(config) {}
+
+int64_t DPaRF::coord_dim() const {
+  return config_.coordinate == "none" ? 0 : 3 + 6 * config_.pe_freqs;
+}
+
+torch::Tensor DPaRF::local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,
+                                       const torch::Tensor& index) {
+  const auto n = index.size(0), k = index.size(1);
+  const auto flat = index.flatten();
+  const auto diff = xs.unsqueeze(1) - frames.origins.index_select(0, flat).view({n, k, 3});
+  const auto rot = frames.rotations.index_select(0, flat).view({n, k, 3, 3});
+  // l_i = sum_j diff_j Rc[j][i]   (the reference: diff (1x3) @ Rc)
+  return (diff.unsqueeze(3) * rot).sum(2);
+}
+
+torch::Tensor DPaRF::field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
+                                     const torch::Tensor& index) const {
+  const auto n = index.size(0), k = index.size(1);
+  if (config_.coordinate == "absolute")
+    return sincos_encoding(xs, config_.pe_freqs, true).unsqueeze(1).expand({n, k, coord_dim()});
+  const auto l = local_coordinates(frames, xs, index);
+  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true).view({n, k, -1});
+}
+
+FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) const {
+  TORCH_CHECK(xs.dim() == 2 && xs.size(1) == 3, "DPaRF points must be (N, 3), got ", xs.sizes());
+  const auto& O = frames.origins;
+  const int64_t nk = config_.nk;
+  TORCH_CHECK(O.size(0) >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", O.size(0));
+  FieldQuery q;
+  // Candidate selection on |x|^2 - 2 x.O + |O|^2; exact distances of the chosen fields below.
+  const auto d2 = torch::addmm((O * O).sum(1).unsqueeze(0), xs, O.t(), 1, -2);
+  q.index = std::get<1>(d2.topk(nk, 1, /*largest=*/false, /*sorted=*/true));
+  const auto n = xs.size(0);
+  const auto diff = xs.unsqueeze(1) - O.index_select(0, q.index.flatten()).view({n, nk, 3});
+  const auto dist = diff.norm(2, -1);
+  q.weight = torch::softmax(-dist / config_.softmax_temperature, 1);
+  if (config_.coordinate == "absolute") {
+    q.coords = sincos_encoding(xs, config_.pe_freqs, true);
+  } else if (config_.coordinate == "relative") {
+    const auto g = field_encodings(frames, xs, q.index);  // (N, Nk, G)
+    q.coords = torch::bmm(q.weight.unsqueeze(1), g).squeeze(1);
+  }
+  return q;
+}
+
+torch::Tensor DPaRF::features(const TokenFrames& frames, const torch::Tensor& tokens,
+                              const torch::Tensor& xs) const {
+  const auto q = query(frames, xs);
+  const auto n = xs.size(0), nk = q.index.size(1), V = tokens.size(0);
+  std::vector<torch::Tensor> per_view;
+  for (int64_t v = 0; v < V; ++v) {
+    auto t = tokens[v].index_select(0, q.index.flatten()).view({n, nk, -1});  // (N, Nk, C)
+    if (coord_dim() > 0) t = torch::cat({t, field_encodings(frames, xs, q.index)}, -1);
+    per_view.push_back((q.weight.unsqueeze(-1) * t).sum(1));
+  }
+  return torch::stack(per_view, 1);
+}
+
+}  // namespace th::model

@@ -1,0 +1,57 @@
+#pragma once
+// SPEC 3.3: DPaRF, the deformable partial radiance fields. Each token owns a local frame
+// (origin Oc = cluster mean of the posed vertices in the SMPL frame, axes Rc = cluster mean of
+// the blended rotations, not re-orthonormalised [parity]); a query point reads its Nk nearest
+// fields, weighted by softmax(-distance / T), each with its local coordinates encoded.
+
+#include <torch/types.h>
+
+#include "core/config.hpp"
+
+namespace th::model {
+
+struct TokenFrames {
+  torch::Tensor origins;    // (Nt, 3) Oc, SMPL frame
+  torch::Tensor rotations;  // (Nt, 3, 3) Rc
+};
+
+// xs_vertices: (Nv, 3) posed vertices in the SMPL frame; A: (Nv, 3, 3); labels: (Nv) int64.
+TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& A,
+                         const torch::Tensor& labels, int64_t num_tokens);
+
+// The Nk nearest fields of N points.
+struct FieldQuery {
+  torch::Tensor index;   // (N, Nk) int64 token ids, nearest first
+  torch::Tensor weight;  // (N, Nk) w_k = softmax_k(-d_k / T)
+  torch::Tensor coords;  // (N, G): sum_k w_k g_k (relative), PE(xs) (absolute); undefined (none)
+};
+
+class DPaRF {
+ public:
+  explicit DPaRF(const DPaRFConfig& config);
+
+  // Width G of the coordinate encoding: 63 for relative/absolute (10 frequencies), 0 for none.
+  int64_t coord_dim() const;
+
+  // xs: (N, 3) points in the SMPL frame.
+  FieldQuery query(const TokenFrames& frames, const torch::Tensor& xs) const;
+
+  // Local coordinates l_k = Rc(k)^T (xs - Oc(k)) of the fields in `index`: (N, Nk, 3).
+  static torch::Tensor local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,
+                                         const torch::Tensor& index);
+
+  // The reference's h_v = sum_k w_k [T_v(k); g_k] (direct, no shortcut).
+  // tokens: (V, Nt, C) -> (N, V, C + G).
+  torch::Tensor features(const TokenFrames& frames, const torch::Tensor& tokens,
+                         const torch::Tensor& xs) const;
+
+  const DPaRFConfig& config() const { return config_; }
+
+ private:
+  // Per-field encodings g_k: (N, Nk, G).
+  torch::Tensor field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
+                                const torch::Tensor& index) const;
+  DPaRFConfig config_;
+};
+
+}  // namespace th::model

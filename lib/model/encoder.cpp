@@ -1,0 +1,253 @@
+#include "model/encoder.hpp"
+
+#include "core/error.hpp"
+
+namespace th::model {
+namespace {
+
+namespace F = torch::nn::functional;
+
+torch::nn::Conv2d conv(int64_t in, int64_t out, int64_t k, int64_t stride, int64_t pad, bool bias) {
+  return torch::nn::Conv2d(
+      torch::nn::Conv2dOptions(in, out, k).stride(stride).padding(pad).bias(bias));
+}
+
+// torchvision's ResNet init: kaiming_normal(fan_out, relu) for convolutions.
+void init_conv(torch::nn::Conv2d& c) {
+  torch::NoGradGuard no_grad;
+  torch::nn::init::kaiming_normal_(c->weight, 0.0, torch::kFanOut, torch::kReLU);
+}
+
+torch::Tensor upsample(const torch::Tensor& x, int64_t H, int64_t W) {
+  return F::interpolate(x, F::InterpolateFuncOptions()
+                               .size(std::vector<int64_t>{H, W})
+                               .mode(torch::kBilinear)
+                               .align_corners(true));
+}
+
+// Channel ranges of the levels inside p_v: [0, 64), [64, 128), [128, 256); colour [256, 384).
+constexpr int64_t kLevelBegin[] = {0, 64, 128, 256};
+
+}  // namespace
+
+// ---- BatchNorm -----------------------------------------------------------------------------
+
+BatchNormImpl::BatchNormImpl(int64_t channels, bool batch_stats)
+    : batch_stats_at_inference(batch_stats) {
+  weight = register_parameter("weight", torch::ones({channels}));
+  bias = register_parameter("bias", torch::zeros({channels}));
+  running_mean = register_buffer("running_mean", torch::zeros({channels}));
+  running_var = register_buffer("running_var", torch::ones({channels}));
+  num_batches_tracked = register_buffer("num_batches_tracked", torch::zeros({}, torch::kLong));
+}
+
+torch::Tensor BatchNormImpl::forward(const torch::Tensor& x) {
+  constexpr double momentum = 0.1, eps = 1e-5;
+  if (is_training()) {
+    {
+      torch::NoGradGuard no_grad;
+      num_batches_tracked += 1;
+    }
+    return torch::batch_norm(x, weight, bias, running_mean, running_var, true, momentum, eps, false);
+  }
+  if (batch_stats_at_inference)  // [parity] statistics of the reference views, not updated
+    return torch::batch_norm(x, weight, bias, {}, {}, true, momentum, eps, false);
+  return torch::batch_norm(x, weight, bias, running_mean, running_var, false, momentum, eps, false);
+}
+
+// ---- ResNet-18 trunk -------------------------------------------------------------------------
+
+BasicBlockImpl::BasicBlockImpl(int64_t in, int64_t out, int64_t stride, bool batch_stats) {
+  conv1 = register_module("conv1", conv(in, out, 3, stride, 1, false));
+  bn1 = register_module("bn1", BatchNorm(out, batch_stats));
+  conv2 = register_module("conv2", conv(out, out, 3, 1, 1, false));
+  bn2 = register_module("bn2", BatchNorm(out, batch_stats));
+  init_conv(conv1);
+  init_conv(conv2);
+  if (stride != 1 || in != out) {
+    auto down = conv(in, out, 1, stride, 0, false);
+    init_conv(down);
+    downsample = register_module("downsample", torch::nn::Sequential(down, BatchNorm(out, batch_stats)));
+  }
+}
+
+torch::Tensor BasicBlockImpl::forward(const torch::Tensor& x) {
+  auto y = torch::relu(bn1(conv1(x)));
+  y = bn2(conv2(y));
+  return torch::relu(y + (downsample ? downsample->forward(x) : x));
+}
+
+ResNetTrunkImpl::ResNetTrunkImpl(bool batch_stats) {
+  conv1 = register_module("conv1", conv(3, 64, 7, 2, 3, false));
+  init_conv(conv1);
+  bn1 = register_module("bn1", BatchNorm(64, batch_stats));
+  layer1 = register_module("layer1", torch::nn::Sequential(BasicBlock(64, 64, 1, batch_stats),
+                                                           BasicBlock(64, 64, 1, batch_stats)));
+  layer2 = register_module("layer2", torch::nn::Sequential(BasicBlock(64, 128, 2, batch_stats),
+                                                           BasicBlock(128, 128, 1, batch_stats)));
+}
+
+std::vector<torch::Tensor> ResNetTrunkImpl::forward(const torch::Tensor& x) {
+  auto l0 = torch::relu(bn1(conv1(x)));
+  auto l1 = layer1->forward(F::max_pool2d(l0, F::MaxPool2dFuncOptions(3).stride(2).padding(1)));
+  auto l2 = layer2->forward(l1);
+  return {l0, l1, l2};
+}
+
+// ---- geometry of sampling --------------------------------------------------------------------
+
+Taps PixelGeometry::level_taps(const torch::Tensor& uv, const torch::Tensor& view, size_t level,
+                               int64_t row_offset) const {
+  return multi_level_taps(uv, view, {level_sizes.at(level)}, {row_offset}, height, width);
+}
+
+Taps PixelGeometry::stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const {
+  std::vector<int64_t> offsets;
+  int64_t offset = 0;
+  for (const auto& [h, w] : level_sizes) {
+    offsets.push_back(offset);
+    offset += views * h * w;
+  }
+  return multi_level_taps(uv, view, level_sizes, offsets, height, width);
+}
+
+Taps PixelGeometry::image_taps(const torch::Tensor& uv, const torch::Tensor& view) const {
+  return multi_level_taps(uv, view, {{height, width}}, {0}, height, width);
+}
+
+torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_taps) const {
+  auto out = weighted_gather(table, level_taps, table_grad_sink);
+  if (image_weight.defined()) out.addmm_(weighted_gather(image_table, image_taps), image_weight.t());
+  return out.add_(bias);
+}
+
+// ---- encoder ---------------------------------------------------------------------------------
+
+EncoderImpl::EncoderImpl(const EncoderConfig& config, bool raw_rgb) : raw_rgb_(raw_rgb) {
+  const bool batch_stats = config.batchnorm == "batch";
+  model = register_module("model", ResNetTrunk(batch_stats));
+  reduction_layer = register_module("reduction_layer", conv(pixel_channels(), 192, 1, 1, 0, true));
+  if (raw_rgb_) upsample_color = register_module("upsample_color", conv(3, 128, 1, 1, 0, true));
+}
+
+EncodedViews EncoderImpl::forward(const torch::Tensor& images) {
+  TORCH_CHECK(images.dim() == 4 && images.size(1) == 3, "encoder images must be (V, 3, H, W), got ",
+              images.sizes());
+  EncodedViews enc;
+  enc.images = images;
+  enc.levels = model->forward(images);
+  enc.geometry.views = images.size(0);
+  enc.geometry.height = images.size(2);
+  enc.geometry.width = images.size(3);
+  for (const auto& l : enc.levels) enc.geometry.level_sizes.emplace_back(l.size(2), l.size(3));
+  return enc;
+}
+
+torch::Tensor EncoderImpl::pixel_features(const EncodedViews& enc) const {
+  const auto H = enc.geometry.height, W = enc.geometry.width;
+  std::vector<torch::Tensor> parts;
+  for (const auto& l : enc.levels) parts.push_back(upsample(l, H, W));
+  if (raw_rgb_) parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
+  return torch::cat(parts, 1);
+}
+
+torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
+                                                 const Taps& image_taps) const {
+  // level_taps: stacked taps (9 per level); split them back per level.
+  std::vector<torch::Tensor> parts;
+  int64_t offset = 0, col = 0;
+  for (const auto& l : enc.levels) {
+    const auto taps_per_level = level_taps.index.size(1) / static_cast<int64_t>(enc.levels.size());
+    Taps t{level_taps.index.narrow(1, col, taps_per_level) - offset,
+           level_taps.weight.narrow(1, col, taps_per_level)};
+    parts.push_back(weighted_gather(to_table(l), t));
+    offset += l.size(0) * l.size(2) * l.size(3);
+    col += taps_per_level;
+  }
+  if (raw_rgb_) {
+    const auto rgb = weighted_gather(to_table(enc.images), image_taps);
+    parts.push_back(F::linear(rgb, upsample_color->weight.flatten(1), upsample_color->bias));
+  }
+  return torch::cat(parts, 1);
+}
+
+PixelReadout EncoderImpl::make_readout(const EncodedViews& enc, const torch::Tensor& weight,
+                                       const torch::Tensor& bias) const {
+  TORCH_CHECK(weight.dim() == 2 && weight.size(1) == pixel_channels(),
+              "readout weight must be (Cout, ", pixel_channels(), "), got ", weight.sizes());
+  PixelReadout r;
+  std::vector<torch::Tensor> tables;
+  for (size_t l = 0; l < enc.levels.size(); ++l) {
+    const auto w = weight.slice(1, kLevelBegin[l], kLevelBegin[l + 1]);
+    tables.push_back(torch::mm(to_table(enc.levels[l]), w.t()));
+  }
+  r.table = torch::cat(tables, 0);
+  r.image_table = to_table(enc.images).detach();
+  r.bias = bias;
+  if (raw_rgb_) {
+    const auto wc = weight.slice(1, 256, 384);  // (Cout, 128)
+    r.image_weight = torch::mm(wc, upsample_color->weight.flatten(1));
+    r.bias = bias + torch::mv(wc, upsample_color->bias);
+  }
+  return r;
+}
+
+torch::Tensor EncoderImpl::paint(const EncodedViews& enc, const torch::Tensor& uv,
+                                 const torch::Tensor& visibility) const {
+  const auto V = uv.size(0), nv = uv.size(1);
+  TORCH_CHECK(uv.dim() == 3 && uv.size(2) == 2, "paint uv must be (V, Nv, 2), got ", uv.sizes());
+  TORCH_CHECK(visibility.sizes() == torch::IntArrayRef({V, nv}), "visibility must be (", V, ", ", nv,
+              "), got ", visibility.sizes());
+  const auto flat = uv.reshape({-1, 2});
+  const auto view = torch::arange(V, uv.options().dtype(torch::kLong)).repeat_interleave(nv);
+  const auto p = sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view),
+                                       enc.geometry.image_taps(flat, view));
+  const auto holder = F::linear(p, reduction_layer->weight.flatten(1), reduction_layer->bias);
+  return holder.view({V, nv, -1}) * visibility.unsqueeze(-1).to(holder.dtype());
+}
+
+torch::Tensor EncoderImpl::paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
+                                        const torch::Tensor& visibility) const {
+  const auto holder = torch::conv2d(pixel_features(enc), reduction_layer->weight, reduction_layer->bias);  // (V, 192, H, W)
+  const auto sampled = grid_sample_pixels(holder, uv.permute({1, 0, 2})).permute({1, 0, 2});
+  return sampled * visibility.unsqueeze(-1).to(sampled.dtype());
+}
+
+void EncoderImpl::load_resnet_state(const std::map<std::string, torch::Tensor>& state,
+                                    const std::string& source) {
+  torch::NoGradGuard no_grad;
+  auto assign = [&](const std::string& name, torch::Tensor& dst) {
+    const auto it = state.find(name);
+    if (it == state.end()) fail(source, ": missing key '", name, "'");
+    if (it->second.sizes() != dst.sizes())
+      fail(source, ": key '", name, "' has shape ", it->second.sizes(), ", expected ", dst.sizes());
+    dst.copy_(it->second);
+  };
+  for (auto& p : model->named_parameters()) assign(p.key(), p.value());
+  for (auto& b : model->named_buffers()) {
+    if (b.key().find("num_batches_tracked") != std::string::npos && !state.count(b.key())) continue;
+    assign(b.key(), b.value());
+  }
+}
+
+torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv) {
+  TORCH_CHECK(map.dim() == 4, "map must be (V, C, H, W), got ", map.sizes());
+  TORCH_CHECK(uv.dim() == 3 && uv.size(1) == map.size(0) && uv.size(2) == 2, "uv must be (N, ",
+              map.size(0), ", 2), got ", uv.sizes());
+  const auto H = map.size(2), W = map.size(3);
+  const auto scale = torch::tensor({2.0 / (W - 1), 2.0 / (H - 1)}, uv.options());
+  const auto grid = (uv * scale - 1).permute({1, 0, 2}).unsqueeze(1);  // (V, 1, N, 2)
+  const auto out = F::grid_sample(map, grid,
+                                  F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(true));
+  return out.squeeze(2).permute({2, 0, 1});  // (N, V, C)
+}
+
+torch::Tensor project_points(const torch::Tensor& pts, const torch::Tensor& K,
+                             const torch::Tensor& R, const torch::Tensor& T) {
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
+  const auto cam = torch::matmul(pts.unsqueeze(0), R.transpose(1, 2)) + T.reshape({-1, 1, 3});
+  const auto img = torch::matmul(cam, K.transpose(1, 2));
+  return img.narrow(2, 0, 2) / img.narrow(2, 2, 1);
+}
+
+}  // namespace th::model

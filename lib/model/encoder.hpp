@@ -1,0 +1,144 @@
+#pragma once
+// SPEC 3.1: the image encoder (ResNet-18 up to layer2, torchvision layout and names), the
+// 384-channel pixel feature p_v, the 192-channel reduction and the painting of the body.
+//
+// The pixel feature is the concatenation of three bilinearly upsampled ResNet levels and a 1x1
+// convolution of the raw image. It is never materialised at full resolution on the fast path:
+// sampling goes through model/sampling.hpp (exact), and per-pixel linear layers that follow p_v
+// are applied to each level before sampling (SPEC 9), see PixelReadout.
+
+#include <torch/torch.h>
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+#include "model/sampling.hpp"
+
+namespace th::model {
+
+// BatchNorm2d with torchvision's parameter names. At inference it normalises with the
+// statistics of the current batch (the V reference images) when `batch_stats_at_inference`
+// [parity, SPEC 3.1], otherwise with the running statistics.
+class BatchNormImpl : public torch::nn::Module {
+ public:
+  BatchNormImpl(int64_t channels, bool batch_stats_at_inference);
+  torch::Tensor forward(const torch::Tensor& x);
+
+  torch::Tensor weight, bias, running_mean, running_var, num_batches_tracked;
+  bool batch_stats_at_inference;
+};
+TORCH_MODULE(BatchNorm);
+
+class BasicBlockImpl : public torch::nn::Module {
+ public:
+  BasicBlockImpl(int64_t in, int64_t out, int64_t stride, bool batch_stats);
+  torch::Tensor forward(const torch::Tensor& x);
+
+  torch::nn::Conv2d conv1{nullptr}, conv2{nullptr};
+  BatchNorm bn1{nullptr}, bn2{nullptr};
+  torch::nn::Sequential downsample{nullptr};
+};
+TORCH_MODULE(BasicBlock);
+
+// conv1, bn1, relu, maxpool, layer1, layer2 of torchvision's resnet18.
+class ResNetTrunkImpl : public torch::nn::Module {
+ public:
+  explicit ResNetTrunkImpl(bool batch_stats);
+  // x: (V, 3, H, W) -> {L0 (V, 64, H/2, W/2), L1 (V, 64, H/4, W/4), L2 (V, 128, H/8, W/8)}
+  std::vector<torch::Tensor> forward(const torch::Tensor& x);
+
+  torch::nn::Conv2d conv1{nullptr};
+  BatchNorm bn1{nullptr};
+  torch::nn::Sequential layer1{nullptr}, layer2{nullptr};
+};
+TORCH_MODULE(ResNetTrunk);
+
+// Where the levels of one frame's views live and how to sample them (plain geometry).
+struct PixelGeometry {
+  int64_t views = 0, height = 0, width = 0;
+  std::vector<std::pair<int64_t, int64_t>> level_sizes;  // (h, w) per ResNet level
+
+  // Taps for points uv: (M, 2) pixel coordinates, view: (M) int64, into
+  // - one level's table (V h_l w_l rows, plus row_offset),
+  // - all levels stacked in one table (level 0 of all views, then level 1, ...),
+  // - the image table (V H W rows; plain bilinear).
+  Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, size_t level,
+                  int64_t row_offset = 0) const;
+  Taps stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
+  Taps image_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
+};
+
+// The encoder output of one frame.
+struct EncodedViews {
+  std::vector<torch::Tensor> levels;  // L0, L1, L2 (V, C_l, h_l, w_l)
+  torch::Tensor images;               // (V, 3, H, W)
+  PixelGeometry geometry;
+};
+
+// A per-pixel linear layer y = W p_v + b on the pixel feature, precomputed per frame on each
+// level (SPEC 9: a linear layer commutes with bilinear upsampling and sampling). Sampled with
+// PixelReadout::sample it equals linear(grid_sample(pixel_features)) up to float rounding.
+struct PixelReadout {
+  torch::Tensor table;         // (sum_l V h_l w_l, Cout) level maps, channels-last, stacked
+  torch::Tensor image_table;   // (V H W, 3) the raw images, channels-last (no gradient)
+  torch::Tensor image_weight;  // (Cout, 3) composed weight of the raw-RGB channels; undefined w/o RGB
+  torch::Tensor bias;          // (Cout)
+  torch::Tensor table_grad_sink;  // optional, see weighted_gather
+
+  // level_taps/image_taps from PixelGeometry for M points; returns (M, Cout).
+  torch::Tensor sample(const Taps& level_taps, const Taps& image_taps) const;
+};
+
+class EncoderImpl : public torch::nn::Module {
+ public:
+  // raw_rgb: include the 128 upsample_color channels in p_v (false: the "w/o RGB" ablation).
+  EncoderImpl(const EncoderConfig& config, bool raw_rgb);
+
+  // images: (V, 3, H, W) in [0, 1] (no mean/std normalisation [parity]).
+  EncodedViews forward(const torch::Tensor& images);
+
+  int64_t pixel_channels() const { return raw_rgb_ ? 384 : 256; }
+  int64_t holder_channels() const { return 192; }
+  bool raw_rgb() const { return raw_rgb_; }
+
+  // The full-resolution pixel feature (V, 384, H, W) of the reference (direct path, tests).
+  torch::Tensor pixel_features(const EncodedViews& enc) const;
+  // p_v at M points without materialising it; returns (M, 384).
+  torch::Tensor sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
+                                      const Taps& image_taps) const;
+  // Per-level precomputation of y = W p + b. weight: (Cout, 384), bias: (Cout).
+  PixelReadout make_readout(const EncodedViews& enc, const torch::Tensor& weight,
+                            const torch::Tensor& bias) const;
+
+  // SPEC 3.1 painting: holder features (192) at the projections of the body vertices, zero
+  // where the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, 192).
+  torch::Tensor paint(const EncodedViews& enc, const torch::Tensor& uv,
+                      const torch::Tensor& visibility) const;
+  // The same the reference's way: materialise reduction(pixel_features) and grid_sample it.
+  torch::Tensor paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
+                             const torch::Tensor& visibility) const;
+
+  // Loads torchvision resnet18 weights (names conv1.weight, bn1.running_mean, layer1.0...;
+  // layer3/layer4/fc are ignored). Throws th::Error naming a missing or mis-shaped key.
+  void load_resnet_state(const std::map<std::string, torch::Tensor>& state, const std::string& source);
+
+  ResNetTrunk model{nullptr};
+  torch::nn::Conv2d reduction_layer{nullptr}, upsample_color{nullptr};
+
+ private:
+  bool raw_rgb_;
+};
+TORCH_MODULE(Encoder);
+
+// grid_sample(bilinear, border, align_corners=true) of maps at pixel coordinates, with the
+// reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
+torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv);
+
+// Pinhole projection x_cam = R x + T, uv = (K x_cam)[:2] / z (SPEC 2.2).
+// pts: (N, 3) world; K, R: (V, 3, 3); T: (V, 3, 1) -> (V, N, 2) pixel coordinates.
+torch::Tensor project_points(const torch::Tensor& pts, const torch::Tensor& K,
+                             const torch::Tensor& R, const torch::Tensor& T);
+
+}  // namespace th::model

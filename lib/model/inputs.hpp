@@ -1,0 +1,31 @@
+#pragma once
+// What the network consumes for one frame: plain tensors, produced by the data pipeline.
+// Sizes come from the tensors (the synthetic body has fewer vertices than SMPL's 6890).
+
+#include <torch/types.h>
+
+#include <cstdint>
+
+namespace th::model {
+
+struct FrameInputs {
+  torch::Tensor ref_images;  // (V, 3, H, W) float in [0, 1], background black (SPEC 2.1)
+  torch::Tensor K;           // (V, 3, 3) intrinsics at the working resolution
+  torch::Tensor R;           // (V, 3, 3) world -> camera rotation
+  torch::Tensor T;           // (V, 3, 1) world -> camera translation, metres
+  torch::Tensor vertices;    // (Nv, 3) posed body vertices, world coordinates
+  torch::Tensor Rh;          // (3, 3) global rotation matrix: x_smpl = Rh^T (x_world - Th)
+  torch::Tensor Th;          // (3) global translation, metres
+  torch::Tensor A;           // (Nv, 3, 3) blended canonical -> posed rotations (SPEC 2.3)
+  torch::Tensor canonical;   // (Nv, 3) canonical vertices (v_template)
+  torch::Tensor visibility;  // (V, Nv) bool, vertex visible in reference view v (SPEC 2.4)
+  torch::Tensor labels;      // (Nv) int64 token (cluster) of each vertex (SPEC 2.5)
+  int64_t num_tokens = 0;    // number of clusters; 0: labels.max() + 1
+
+  int64_t views() const { return ref_images.size(0); }
+  int64_t num_vertices() const { return vertices.size(0); }
+  // Checks shapes and dtypes; TORCH_CHECK names the offending tensor.
+  void check() const;
+};
+
+}  // namespace th::model

@@ -1,0 +1,27 @@
+#pragma once
+// Sine-cosine encodings of SPEC 3.2 (tokens), 3.3 (local coordinates) and 3.4 (view
+// directions). The layout is the reference's: for each frequency, sin of x, y, z, then cos of
+// x, y, z; cos is evaluated as sin(x * f + pi/2) in the input's precision [parity].
+
+#include <torch/types.h>
+
+namespace th::model {
+
+// Frequencies f_k = float(pi) * 2^k and phases {0, float(pi/2)} of the pi-based encodings,
+// repeated as in the reference buffers `_freqs` and `_phases`: both (2 * num_freqs).
+torch::Tensor pe_frequencies(int64_t num_freqs, const torch::TensorOptions& options);
+torch::Tensor pe_phases(int64_t num_freqs, const torch::TensorOptions& options);
+
+// x: (N, 3) -> (N, [3 +] 6 * num_freqs): [x,] sin(f0 x), cos(f0 x), sin(f1 x), ...
+// Each value is sin(x * f + phase) with the product and the sum rounded separately (as numpy
+// or an unfused float computation does). With `fused` the product and sum are rounded once
+// (fused multiply-add), which is what PyTorch's addcmul produces on FMA hardware; CPU only.
+torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool include_input,
+                              bool fused = false);
+
+// View-direction encoding gamma(d) (SPEC 3.4, NeRF's embedder, 4 octaves):
+// d: (N, 3) unit -> (N, 27) = [d, sin d, cos d, sin 2d, cos 2d, sin 4d, cos 4d, sin 8d, cos 8d].
+torch::Tensor direction_encoding(const torch::Tensor& d);
+constexpr int64_t kDirectionEncodingDim = 27;
+
+}  // namespace th::model

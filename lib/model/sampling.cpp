@@ -1,0 +1,302 @@
+#include "model/sampling.hpp"
+
+#include <ATen/Parallel.h>
+#include <torch/torch.h>
+
+#include <algorithm>
+
+namespace th::model {
+namespace {
+
+namespace F = torch::nn::functional;
+
+// One axis of the composed interpolation. x: (M) positions on the image axis of size S; the
+// map axis has size s. Returns (index (M, k), weight (M, k)) over map texels, k = 3 (k = 2 when
+// s == S, where upsampling is the identity).
+std::pair<torch::Tensor, torch::Tensor> axis_taps(const torch::Tensor& x_in, int64_t s, int64_t S) {
+  // grid_sample, border padding: clamp to the image, then the two neighbouring image pixels.
+  const auto x = x_in.clamp(0, static_cast<double>(S - 1));
+  const auto i0 = x.floor().clamp(0, static_cast<double>(std::max<int64_t>(S - 2, 0)));
+  const auto f = x - i0;
+  if (s == S) {
+    const auto j = i0.to(torch::kLong);
+    return {torch::stack({j, (j + 1).clamp_max(S - 1)}, 1), torch::stack({1 - f, f}, 1)};
+  }
+  // upsample_bilinear2d(align_corners=true): image pixel i reads the map at X = i * scale, with
+  // scale computed in the working precision as ATen does; texels floor(X) and floor(X) + 1
+  // (the latter only inside the map).
+  const double scale_d = S > 1 ? static_cast<double>(s - 1) / static_cast<double>(S - 1) : 0.0;
+  const auto scale = torch::scalar_tensor(scale_d, x.options());
+  const auto X0 = i0 * scale;
+  const auto X1 = (i0 + 1) * scale;
+  const auto j0 = X0.floor().clamp_max(static_cast<double>(s - 1));
+  const auto j1 = X1.floor().clamp_max(static_cast<double>(s - 1));
+  const auto l0 = (X0 - j0).clamp(0, 1);
+  const auto l1 = (X1 - j1).clamp(0, 1);
+  const auto p0 = (j0 < static_cast<double>(s - 1)).to(torch::kLong);
+  const auto p1 = (j1 < static_cast<double>(s - 1)).to(torch::kLong);
+  const auto d = (j1 - j0).to(torch::kLong);  // 0 or 1 since scale <= 1
+  // Four (offset, weight) contributions relative to j0, merged into offsets 0, 1, 2.
+  const auto offsets = torch::stack({torch::zeros_like(d), p0, d, d + p1}, 1);
+  const auto values = torch::stack({(1 - f) * (1 - l0), (1 - f) * l0, f * (1 - l1), f * l1}, 1);
+  auto weight = torch::zeros({x.size(0), 3}, x.options()).scatter_add_(1, offsets, values);
+  auto index = (j0.to(torch::kLong).unsqueeze(1) + torch::arange(3, d.options())).clamp_max(s - 1);
+  return {index, weight};
+}
+
+// Inner loops with a runtime choice of vector width (the project builds for baseline x86-64).
+template <class T>
+void gather_rows(T* __restrict out, const T* __restrict table, const int64_t* __restrict index,
+                 const T* __restrict weight, int64_t T_, int64_t C) {
+  for (int64_t c = 0; c < C; ++c) out[c] = 0;
+  for (int64_t t = 0; t < T_; ++t) {
+    const T w = weight[t];
+    if (w == T(0)) continue;
+    const T* __restrict row = table + index[t] * C;
+    for (int64_t c = 0; c < C; ++c) out[c] += w * row[c];
+  }
+}
+
+__attribute__((target_clones("avx512f", "avx2", "default"))) void gather_rows_f(
+    float* __restrict out, const float* __restrict table, const int64_t* __restrict index,
+    const float* __restrict weight, int64_t T_, int64_t C) {
+  gather_rows<float>(out, table, index, weight, T_, C);
+}
+
+__attribute__((target_clones("avx512f", "avx2", "default"))) void scatter_rows_f(
+    float* __restrict grad_table, const float* __restrict grad_out, const int64_t* __restrict index,
+    const float* __restrict weight, int64_t T_, int64_t C, int64_t c0, int64_t c1) {
+  for (int64_t t = 0; t < T_; ++t) {
+    const float w = weight[t];
+    if (w == 0.f) continue;
+    float* __restrict row = grad_table + index[t] * C;
+    for (int64_t c = c0; c < c1; ++c) row[c] += w * grad_out[c];
+  }
+}
+
+template <class T>
+void scatter_rows(T* __restrict grad_table, const T* __restrict grad_out,
+                  const int64_t* __restrict index, const T* __restrict weight, int64_t T_,
+                  int64_t C, int64_t c0, int64_t c1) {
+  for (int64_t t = 0; t < T_; ++t) {
+    const T w = weight[t];
+    if (w == T(0)) continue;
+    T* __restrict row = grad_table + index[t] * C;
+    for (int64_t c = c0; c < c1; ++c) row[c] += w * grad_out[c];
+  }
+}
+
+void gather_rows_any(float* out, const float* table, const int64_t* index, const float* weight,
+                     int64_t T_, int64_t C) {
+  gather_rows_f(out, table, index, weight, T_, C);
+}
+void gather_rows_any(double* out, const double* table, const int64_t* index, const double* weight,
+                     int64_t T_, int64_t C) {
+  gather_rows<double>(out, table, index, weight, T_, C);
+}
+void scatter_rows_any(float* gt, const float* g, const int64_t* index, const float* weight,
+                      int64_t T_, int64_t C, int64_t c0, int64_t c1) {
+  scatter_rows_f(gt, g, index, weight, T_, C, c0, c1);
+}
+void scatter_rows_any(double* gt, const double* g, const int64_t* index, const double* weight,
+                      int64_t T_, int64_t C, int64_t c0, int64_t c1) {
+  scatter_rows<double>(gt, g, index, weight, T_, C, c0, c1);
+}
+
+torch::Tensor gather_forward_cpu(const torch::Tensor& table, const torch::Tensor& index,
+                                 const torch::Tensor& weight) {
+  const int64_t M = index.size(0), T_ = index.size(1), C = table.size(1);
+  auto out = torch::empty({M, C}, table.options());
+  AT_DISPATCH_FLOATING_TYPES(table.scalar_type(), "weighted_gather", [&] {
+    const scalar_t* tab = table.data_ptr<scalar_t>();
+    const int64_t* idx = index.data_ptr<int64_t>();
+    const scalar_t* w = weight.data_ptr<scalar_t>();
+    scalar_t* o = out.data_ptr<scalar_t>();
+    at::parallel_for(0, M, 64, [&](int64_t begin, int64_t end) {
+      for (int64_t m = begin; m < end; ++m) {
+        gather_rows_any(o + m * C, tab, idx + m * T_, w + m * T_, T_, C);
+      }
+    });
+  });
+  return out;
+}
+
+// Adds the gradient of the table into grad_table (R, C).
+void gather_backward_cpu(const torch::Tensor& grad_out, const torch::Tensor& index,
+                         const torch::Tensor& weight, torch::Tensor& grad_table) {
+  const int64_t M = index.size(0), T_ = index.size(1), C = grad_out.size(1);
+  TORCH_CHECK(grad_table.is_contiguous() && grad_table.size(1) == C, "gradient buffer must be contiguous (R, ", C, ")");
+  AT_DISPATCH_FLOATING_TYPES(grad_out.scalar_type(), "weighted_gather_backward", [&] {
+    const scalar_t* g = grad_out.data_ptr<scalar_t>();
+    const int64_t* idx = index.data_ptr<int64_t>();
+    const scalar_t* w = weight.data_ptr<scalar_t>();
+    scalar_t* gt = grad_table.data_ptr<scalar_t>();
+    // Threads split the channels, so no two threads write the same address.
+    const int64_t block = std::max<int64_t>(16, (C + at::get_num_threads() - 1) / at::get_num_threads());
+    const int64_t blocks = (C + block - 1) / block;
+    at::parallel_for(0, blocks, 1, [&](int64_t b0, int64_t b1) {
+      for (int64_t b = b0; b < b1; ++b) {
+        const int64_t c0 = b * block, c1 = std::min(C, c0 + block);
+        for (int64_t m = 0; m < M; ++m) {
+          scatter_rows_any(gt, g + m * C, idx + m * T_, w + m * T_, T_, C, c0, c1);
+        }
+      }
+    });
+  });
+}
+
+struct WeightedGather : torch::autograd::Function<WeightedGather> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& table,
+                               const torch::Tensor& index, const torch::Tensor& weight,
+                               const c10::optional<torch::Tensor>& sink) {
+    ctx->save_for_backward({index, weight});
+    ctx->saved_data["rows"] = table.size(0);
+    // Not a saved variable: other chunks update the sink in place between forward and backward.
+    if (sink.has_value()) ctx->saved_data["sink"] = *sink;
+    return gather_forward_cpu(table, index, weight);
+  }
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grad) {
+    const auto saved = ctx->get_saved_variables();
+    const auto g = grad[0].contiguous();
+    if (ctx->saved_data.count("sink")) {
+      auto sink = ctx->saved_data["sink"].toTensor();
+      gather_backward_cpu(g, saved[0], saved[1], sink);
+      return {torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    }
+    auto grad_table = torch::zeros({ctx->saved_data["rows"].toInt(), g.size(1)}, g.options());
+    gather_backward_cpu(g, saved[0], saved[1], grad_table);
+    return {grad_table, torch::Tensor(), torch::Tensor(), torch::Tensor()};
+  }
+};
+
+// The scalar version of axis_taps (same operations in the same precision).
+template <class T>
+int axis_taps_scalar(T x, int64_t s, int64_t S, int64_t* idx, T* w) {
+  x = std::min(std::max(x, T(0)), static_cast<T>(S - 1));
+  const T i0 = std::min(std::max(std::floor(x), T(0)), static_cast<T>(std::max<int64_t>(S - 2, 0)));
+  const T f = x - i0;
+  if (s == S) {
+    const auto j = static_cast<int64_t>(i0);
+    idx[0] = j;
+    idx[1] = std::min(j + 1, S - 1);
+    w[0] = 1 - f;
+    w[1] = f;
+    return 2;
+  }
+  const T scale = static_cast<T>(S > 1 ? static_cast<double>(s - 1) / static_cast<double>(S - 1) : 0.0);
+  const T X0 = i0 * scale, X1 = (i0 + 1) * scale;
+  const T j0 = std::min(std::floor(X0), static_cast<T>(s - 1));
+  const T j1 = std::min(std::floor(X1), static_cast<T>(s - 1));
+  const T l0 = std::min(std::max(X0 - j0, T(0)), T(1));
+  const T l1 = std::min(std::max(X1 - j1, T(0)), T(1));
+  const int p0 = j0 < static_cast<T>(s - 1), p1 = j1 < static_cast<T>(s - 1);
+  const int d = static_cast<int>(j1 - j0);
+  w[0] = w[1] = w[2] = 0;
+  w[0] += (1 - f) * (1 - l0);
+  w[p0] += (1 - f) * l0;
+  w[d] += f * (1 - l1);
+  w[d + p1] += f * l1;
+  const auto j = static_cast<int64_t>(j0);
+  for (int k = 0; k < 3; ++k) idx[k] = std::min(j + k, s - 1);
+  return 3;
+}
+
+}  // namespace
+
+Taps multi_level_taps(const torch::Tensor& uv, const torch::Tensor& view,
+                      const std::vector<std::pair<int64_t, int64_t>>& sizes,
+                      const std::vector<int64_t>& row_offsets, int64_t H, int64_t W) {
+  TORCH_CHECK(sizes.size() == row_offsets.size(), "one row offset per map");
+  if (!uv.device().is_cpu()) {
+    std::vector<Taps> taps;
+    for (size_t l = 0; l < sizes.size(); ++l)
+      taps.push_back(upsampled_bilinear_taps(uv, view, sizes[l].first, sizes[l].second, H, W, row_offsets[l]));
+    return concat_taps(taps);
+  }
+  TORCH_CHECK(uv.dim() == 2 && uv.size(1) == 2, "uv must be (M, 2), got ", uv.sizes());
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ", view.sizes());
+  int64_t T_ = 0;
+  for (const auto& [h, w] : sizes) {
+    TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ", W, ")");
+    T_ += (h == H && w == W) ? 4 : 9;
+  }
+  const int64_t M = uv.size(0);
+  const auto uvc = uv.contiguous();
+  const auto vc = view.to(torch::kLong).contiguous();
+  Taps taps{torch::empty({M, T_}, vc.options()), torch::empty({M, T_}, uv.options())};
+  AT_DISPATCH_FLOATING_TYPES(uv.scalar_type(), "multi_level_taps", [&] {
+    const scalar_t* p = uvc.data_ptr<scalar_t>();
+    const int64_t* v = vc.data_ptr<int64_t>();
+    int64_t* oi = taps.index.data_ptr<int64_t>();
+    scalar_t* ow = taps.weight.data_ptr<scalar_t>();
+    at::parallel_for(0, M, 1024, [&](int64_t begin, int64_t end) {
+      for (int64_t m = begin; m < end; ++m) {
+        int64_t* ti = oi + m * T_;
+        scalar_t* tw = ow + m * T_;
+        for (size_t l = 0; l < sizes.size(); ++l) {
+          const auto [h, w] = sizes[l];
+          int64_t ix[3], iy[3];
+          scalar_t wx[3], wy[3];
+          const int nx = axis_taps_scalar<scalar_t>(p[2 * m], w, W, ix, wx);
+          const int ny = axis_taps_scalar<scalar_t>(p[2 * m + 1], h, H, iy, wy);
+          const int64_t base = v[m] * h * w + row_offsets[l];
+          for (int a = 0; a < ny; ++a)
+            for (int b = 0; b < nx; ++b) {
+              *ti++ = base + iy[a] * w + ix[b];
+              *tw++ = wy[a] * wx[b];
+            }
+        }
+      }
+    });
+  });
+  return taps;
+}
+
+Taps upsampled_bilinear_taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t h,
+                             int64_t w, int64_t H, int64_t W, int64_t row_offset) {
+  TORCH_CHECK(uv.dim() == 2 && uv.size(1) == 2, "uv must be (M, 2), got ", uv.sizes());
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ", view.sizes());
+  TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ", W, ")");
+  auto [ix, wx] = axis_taps(uv.select(1, 0), w, W);
+  auto [iy, wy] = axis_taps(uv.select(1, 1), h, H);
+  const auto base = view.to(torch::kLong) * (h * w) + row_offset;
+  Taps taps;
+  taps.index = (base.view({-1, 1, 1}) + iy.unsqueeze(2) * w + ix.unsqueeze(1)).flatten(1);
+  taps.weight = (wy.unsqueeze(2) * wx.unsqueeze(1)).flatten(1).contiguous();
+  return taps;
+}
+
+Taps concat_taps(const std::vector<Taps>& taps) {
+  std::vector<torch::Tensor> index, weight;
+  for (const auto& t : taps) {
+    index.push_back(t.index);
+    weight.push_back(t.weight);
+  }
+  return {torch::cat(index, 1), torch::cat(weight, 1)};
+}
+
+torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps, const torch::Tensor& grad_sink) {
+  TORCH_CHECK(table.dim() == 2, "table must be (R, C), got ", table.sizes());
+  TORCH_CHECK(taps.index.sizes() == taps.weight.sizes(), "taps index ", taps.index.sizes(),
+              " and weight ", taps.weight.sizes(), " differ");
+  const auto weight = taps.weight.to(table.scalar_type()).contiguous();
+  if (!table.device().is_cpu()) {
+    // Device-generic path: gather, weight, sum (autograd through index_select).
+    const auto M = taps.index.size(0), T_ = taps.index.size(1);
+    return (table.index_select(0, taps.index.flatten()).view({M, T_, -1}) * weight.unsqueeze(-1))
+        .sum(1);
+  }
+  if (grad_sink.defined())
+    TORCH_CHECK(grad_sink.sizes() == table.sizes() && grad_sink.is_contiguous(),
+                "gradient sink must be a contiguous tensor shaped like the table ", table.sizes());
+  return WeightedGather::apply(table.contiguous(), taps.index.contiguous(), weight,
+                               grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt);
+}
+
+torch::Tensor to_table(const torch::Tensor& map) {
+  TORCH_CHECK(map.dim() == 4, "feature map must be (V, C, h, w), got ", map.sizes());
+  return map.permute({0, 2, 3, 1}).reshape({-1, map.size(1)});
+}
+
+}  // namespace th::model

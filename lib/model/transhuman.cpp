@@ -1,0 +1,326 @@
+#include "model/transhuman.hpp"
+
+#include <torch/csrc/autograd/custom_function.h>
+
+#include <algorithm>
+
+#include "core/error.hpp"
+#include "model/positional_encoding.hpp"
+#include "render/body_distance.hpp"
+
+namespace th::model {
+namespace {
+
+namespace F = torch::nn::functional;
+using render::ScopedTimer;
+
+// Rows (n, v) of points x views, n-major, and the view of each row.
+torch::Tensor view_ids(int64_t n, int64_t V, const torch::Device& device) {
+  return torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(device)).repeat({n});
+}
+
+}  // namespace
+
+TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
+    : config_(config), cull_distance_(cull_distance) {
+  encoder = register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb));
+  if (config.fdi.human) human = register_module("human", make_human_representation(config));
+  fdi = register_module("fdi", FDI(config.fdi, encoder->pixel_channels()));
+  heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));
+}
+
+FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
+  in.check();
+  FrameCache cache;
+  auto& t = cache.tensors;
+  const auto opts = in.ref_images.options();
+  t["cam.K"] = in.K.to(opts);
+  t["cam.R"] = in.R.to(opts);
+  t["cam.T"] = in.T.to(opts).reshape({-1, 3, 1});
+  t["body.Rh"] = in.Rh.to(opts);
+  t["body.Th"] = in.Th.to(opts).reshape({3});
+  cache.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance_);
+
+  EncodedViews enc;
+  {
+    ScopedTimer timer(profile_, "encoder");
+    enc = encoder->forward(in.ref_images);
+  }
+  cache.geometry = enc.geometry;
+  if (human) {
+    const auto vertices = in.vertices.to(opts);
+    torch::Tensor painted;
+    {
+      ScopedTimer timer(profile_, "painting");
+      const auto uv = project_points(vertices, t["cam.K"], t["cam.R"], t["cam.T"]);
+      painted = config_.encoder.fast_sampling
+                    ? encoder->paint(enc, uv, in.visibility)
+                    : encoder->paint_direct(enc, uv, in.visibility);
+    }
+    ScopedTimer timer(profile_, "transhe");
+    const auto xs_vertices = torch::mm(vertices - t["body.Th"], t["body.Rh"]);
+    human->prepare(in, painted, xs_vertices, cache);
+  }
+  ScopedTimer timer(profile_, "readouts");
+  if (config_.fdi.appearance) {
+    if (config_.exact_shortcuts) {
+      // SPEC 9: the per-pixel layers after p_v, applied once per frame on each level.
+      const auto hf = heads->fold();
+      const auto alpha = encoder->make_readout(enc, fdi->alpha_res_0->weight, fdi->alpha_res_0->bias);
+      const auto color = encoder->make_readout(enc, hf.readout_weight, hf.readout_bias);
+      t["app.image_table"] = alpha.image_table;
+      for (const auto& [name, r] : {std::pair{"alpha", alpha}, std::pair{"color", color}}) {
+        t[std::string("app.") + name + ".table"] = r.table;
+        t[std::string("app.") + name + ".bias"] = r.bias;
+        if (r.image_weight.defined()) t[std::string("app.") + name + ".image_weight"] = r.image_weight;
+      }
+    } else if (config_.encoder.fast_sampling) {
+      for (size_t l = 0; l < enc.levels.size(); ++l) t["enc.level" + std::to_string(l)] = enc.levels[l];
+      t["enc.images"] = enc.images;
+    } else {
+      t["enc.pixel"] = encoder->pixel_features(enc);  // (V, Cpix, H, W), the reference's tensor
+    }
+  }
+  if (config_.exact_shortcuts) {
+    const auto ff = fdi->fold();
+    const auto hf = heads->fold();
+    for (const auto& [name, v] : {std::pair{"fold.w0", ff.w0}, std::pair{"fold.b0", ff.b0},
+                                  std::pair{"fold.w1", ff.w1}, std::pair{"fold.b1", ff.b1},
+                                  std::pair{"fold.e_weight", hf.e_weight}, std::pair{"fold.e_bias", hf.e_bias}})
+      if (v.defined()) t[name] = v;
+  }
+  return cache;
+}
+
+torch::Tensor TransHumanImpl::sample_pixels(const FrameCache& cache, const torch::Tensor& uv,
+                                            const std::string& readout) {
+  ScopedTimer timer(profile_, "sampling");
+  const auto n = uv.size(0), V = uv.size(1);
+  const auto flat = uv.reshape({-1, 2});
+  if (config_.exact_shortcuts) {
+    const auto view = view_ids(n, V, uv.device());
+    const auto& g = cache.geometry;
+    PixelReadout r;
+    r.table = cache.at("app." + readout + ".table");
+    r.bias = cache.at("app." + readout + ".bias");
+    r.table_grad_sink = cache.sink("app." + readout + ".table");
+    r.image_table = cache.at("app.image_table");
+    if (cache.has("app." + readout + ".image_weight")) r.image_weight = cache.at("app." + readout + ".image_weight");
+    return r.sample(g.stacked_level_taps(flat, view), g.image_taps(flat, view)).view({n, V, -1});
+  }
+  // Reference path: p_v itself (readout "p"), then the layers act on it.
+  torch::Tensor p;
+  if (config_.encoder.fast_sampling) {
+    EncodedViews enc;
+    for (size_t l = 0; l < cache.geometry.level_sizes.size(); ++l)
+      enc.levels.push_back(cache.at("enc.level" + std::to_string(l)));
+    enc.images = cache.at("enc.images");
+    enc.geometry = cache.geometry;
+    const auto view = view_ids(n, V, uv.device());
+    p = encoder->sample_pixel_features(enc, cache.geometry.stacked_level_taps(flat, view),
+                                       cache.geometry.image_taps(flat, view));
+    p = p.view({n, V, -1});
+  } else {
+    p = grid_sample_pixels(cache.at("enc.pixel"), uv);
+  }
+  if (readout == "alpha") return fdi->alpha_res_0(p);
+  return p;
+}
+
+TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
+  Trunk out;
+  torch::Tensor s, a;
+  if (human) {
+    ScopedTimer timer(profile_, "dparf");
+    const auto xs = torch::mm(pts - cache.at("body.Th"), cache.at("body.Rh"));
+    s = human->forward(cache, xs);
+  }
+  {
+    ScopedTimer timer(profile_, "sampling");
+    out.uv = project_points(pts, cache.at("cam.K"), cache.at("cam.R"), cache.at("cam.T"))
+                 .permute({1, 0, 2})
+                 .contiguous();
+  }
+  if (config_.fdi.appearance) a = sample_pixels(cache, out.uv, "alpha").relu_();
+  ScopedTimer timer(profile_, "fdi");
+  if (config_.exact_shortcuts) {
+    FDIFolded f;
+    if (cache.has("fold.w0")) f.w0 = cache.at("fold.w0"), f.b0 = cache.at("fold.b0");
+    if (cache.has("fold.w1")) f.w1 = cache.at("fold.w1"), f.b1 = cache.at("fold.b1");
+    out.e = fdi->forward_folded(f, s, a);
+  } else {
+    out.e = fdi->forward(s, a);
+  }
+  return out;
+}
+
+torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs) {
+  torch::Tensor pix;
+  if (config_.fdi.appearance) pix = sample_pixels(cache, t.uv, config_.exact_shortcuts ? "color" : "p");
+  ScopedTimer timer(profile_, "heads");
+  const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
+  if (config_.exact_shortcuts) {
+    HeadsFolded f;
+    f.e_weight = cache.at("fold.e_weight");
+    f.e_bias = cache.at("fold.e_bias");
+    return heads->color_folded(f, t.e, pix, code);
+  }
+  return heads->color(t.e, pix, code);
+}
+
+torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tensor& pts,
+                                      const torch::Tensor& dirs) {
+  const auto t = trunk(cache, pts);
+  torch::Tensor sigma;
+  {
+    ScopedTimer timer(profile_, "heads");
+    sigma = heads->density(t.e);
+  }
+  const auto rgb = color(cache, t, dirs);
+  return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
+}
+
+torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
+                                                    const torch::Tensor& dirs) {
+  const auto t = trunk(cache, pts);
+  torch::Tensor sigma;
+  {
+    ScopedTimer timer(profile_, "heads");
+    sigma = heads->density(t.e);
+  }
+  auto raw = torch::zeros({pts.size(0), 4}, sigma.options());
+  raw.select(1, 3).copy_(sigma);
+  const auto idx = (sigma > 0).nonzero().flatten();
+  if (idx.size(0) == 0) return raw;
+  const Trunk sub{t.e.index_select(0, idx), t.uv.index_select(0, idx)};
+  raw.index_copy_(0, idx, torch::cat({color(cache, sub, dirs.index_select(0, idx)),
+                                      sigma.index_select(0, idx).unsqueeze(1)}, 1));
+  return raw;
+}
+
+// ---- chunked evaluation with recomputation in the backward pass ------------------------------
+
+namespace {
+
+struct ChunkJob : torch::CustomClassHolder {
+  TransHumanImpl* model = nullptr;
+  FrameCache cache;
+  std::vector<std::string> names;  // cache tensors that receive gradients
+  int64_t chunk = 0;
+};
+
+torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, const torch::Tensor& pts,
+                             const torch::Tensor& dirs, int64_t chunk, bool density_first) {
+  const int64_t n = pts.size(0);
+  if (n <= chunk)
+    return density_first ? model.forward_density_first(cache, pts, dirs) : model.forward(cache, pts, dirs);
+  std::vector<torch::Tensor> parts;
+  for (int64_t b = 0; b < n; b += chunk) {
+    const auto p = pts.slice(0, b, std::min(n, b + chunk)), d = dirs.slice(0, b, std::min(n, b + chunk));
+    parts.push_back(density_first ? model.forward_density_first(cache, p, d) : model.forward(cache, p, d));
+  }
+  return torch::cat(parts);
+}
+
+// Forward without a graph; backward recomputes chunk by chunk with leaf copies of the frame
+// tensors, accumulates their gradients and hands them to the outer graph (the encoder, ViT and
+// the folded weights), while parameters used per point accumulate into .grad directly.
+struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, torch::TensorList frame,
+                               const torch::Tensor& pts, const torch::Tensor& dirs,
+                               c10::intrusive_ptr<ChunkJob> job) {
+    ctx->save_for_backward({pts, dirs});
+    ctx->saved_data["job"] = c10::IValue::make_capsule(job);
+    return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, false);
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grad_out) {
+    auto job = c10::static_intrusive_pointer_cast<ChunkJob>(ctx->saved_data["job"].toCapsule());
+    const auto saved = ctx->get_saved_variables();
+    const auto &pts = saved[0], &dirs = saved[1];
+    torch::AutoGradMode enable(true);
+    FrameCache cache = job->cache;
+    std::vector<torch::Tensor> leaves, sinks;
+    for (const auto& name : job->names) {
+      auto leaf = cache.tensors.at(name).detach().requires_grad_(true);
+      cache.tensors[name] = leaf;
+      leaves.push_back(leaf);
+      sinks.emplace_back();
+      if (FrameCache::gathered(name) && leaf.device().is_cpu())
+        sinks.back() = cache.grad_sinks[name] = torch::zeros_like(leaf);
+    }
+    const auto& g = grad_out[0];
+    const int64_t n = pts.size(0);
+    for (int64_t b = 0; b < n; b += job->chunk) {
+      const int64_t e = std::min(n, b + job->chunk);
+      const auto raw = job->model->forward(cache, pts.slice(0, b, e), dirs.slice(0, b, e));
+      torch::autograd::backward({raw}, {g.slice(0, b, e)});
+    }
+    torch::autograd::variable_list grads;
+    for (size_t i = 0; i < leaves.size(); ++i) {
+      auto g = leaves[i].grad();
+      if (sinks[i].defined()) g = g.defined() ? g + sinks[i] : sinks[i];
+      grads.push_back(g.defined() ? g : torch::zeros_like(leaves[i]));
+    }
+    grads.emplace_back();  // pts
+    grads.emplace_back();  // dirs
+    grads.emplace_back();  // job
+    return grads;
+  }
+};
+
+}  // namespace
+
+FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint)
+    : model_(model), cache_(cache), chunk_(chunk_points), checkpoint_(checkpoint) {}
+
+torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dirs) {
+  if (!checkpoint_ || !torch::GradMode::is_enabled()) return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
+  auto job = c10::make_intrusive<ChunkJob>();
+  job->model = &model_;
+  job->cache = cache_;
+  job->chunk = chunk_;
+  std::vector<torch::Tensor> frame;
+  for (const auto& [name, tensor] : cache_.tensors)
+    if (tensor.requires_grad()) {
+      job->names.push_back(name);
+      frame.push_back(tensor);
+    }
+  return CheckpointedChunks::apply(torch::TensorList(frame), pts, dirs, job);
+}
+
+torch::Tensor FrameField::raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) {
+  torch::NoGradGuard no_grad;
+  return forward_chunks(model_, cache_, pts, dirs, chunk_, true);
+}
+
+std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model) {
+  std::vector<ParameterCount> out{{"encoder (ResNet-18 to layer2)", 0}, {"reduction + colour", 0}};
+  const bool spc = model.config().representation == "spc_trilinear";
+  if (model.human) out.push_back({spc ? "SPC network" : "ViT", 0});
+  out.push_back({"heads (fc_0, FDI, density, colour)", 0});
+  auto find = [&](const std::string& name) -> int64_t& {
+    for (auto& c : out)
+      if (c.module == name) return c.count;
+    throw std::logic_error("no parameter group " + name);
+  };
+  for (const auto& p : model.named_parameters()) {
+    const auto& k = p.key();
+    auto starts = [&](const char* prefix) { return k.rfind(prefix, 0) == 0; };
+    int64_t* slot;
+    if (starts("encoder.model.")) slot = &find("encoder (ResNet-18 to layer2)");
+    else if (starts("encoder.")) slot = &find("reduction + colour");
+    else if (starts("human.ViT.")) slot = &find("ViT");
+    else if (starts("human.embed.") || starts("human.conv.")) slot = &find("SPC network");
+    else slot = &find("heads (fc_0, FDI, density, colour)");
+    *slot += p.value().numel();
+  }
+  int64_t total = 0;
+  for (const auto& c : out) total += c.count;
+  out.push_back({"total", total});
+  return out;
+}
+
+}  // namespace th::model

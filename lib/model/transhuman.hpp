@@ -1,0 +1,88 @@
+#pragma once
+// The composed TransHuman network (SPEC 3): encoder -> painting -> human representation
+// (TransHE + DPaRF, or the SPC baseline) -> FDI -> heads. Per-frame work happens once in
+// prepare(); forward() evaluates points. The components are chosen by the ModelConfig.
+
+#include <torch/torch.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+#include "model/encoder.hpp"
+#include "model/fdi.hpp"
+#include "model/frame_cache.hpp"
+#include "model/heads.hpp"
+#include "model/human.hpp"
+#include "model/inputs.hpp"
+#include "render/volume.hpp"
+
+namespace th::model {
+
+class TransHumanImpl : public torch::nn::Module {
+ public:
+  explicit TransHumanImpl(const ModelConfig& config, double cull_distance = 0.1);
+
+  // Per-frame precomputation: encoder, painting, tokens, ViT, token frames, fc_0 on tokens,
+  // readouts of the pixel features and folded weights, and the body-distance structure.
+  // Under autograd the cached tensors keep their history (training).
+  FrameCache prepare(const FrameInputs& in);
+
+  // pts: (N, 3) world, dirs: (N, 3) ray directions (any length) -> raw (N, 4): rgb logits,
+  // sigma_raw. One chunk: the caller bounds N (see FrameField).
+  torch::Tensor forward(const FrameCache& cache, const torch::Tensor& pts, const torch::Tensor& dirs);
+  // As forward, but the colour branch runs only where sigma_raw > 0 (zeros elsewhere).
+  torch::Tensor forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
+                                      const torch::Tensor& dirs);
+
+  // Per-stage wall times are added to `profile` when set (benchmarks).
+  void set_profile(render::Profile* profile) { profile_ = profile; }
+  const ModelConfig& config() const { return config_; }
+
+  Encoder encoder{nullptr};
+  std::shared_ptr<HumanRepresentation> human;  // undefined for the "w/o h" ablation
+  FDI fdi{nullptr};
+  Heads heads{nullptr};
+
+ private:
+  // The per-point trunk: e (N, V, 256), plus what the colour head needs.
+  struct Trunk {
+    torch::Tensor e, uv;  // e: (N, V, 256); uv: (N, V, 2)
+  };
+  Trunk trunk(const FrameCache& cache, const torch::Tensor& pts);
+  torch::Tensor color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs);
+  torch::Tensor sample_pixels(const FrameCache& cache, const torch::Tensor& uv, const std::string& readout);
+
+  ModelConfig config_;
+  double cull_distance_;
+  render::Profile* profile_ = nullptr;
+};
+TORCH_MODULE(TransHuman);
+
+// The renderer's view of one prepared frame: chunks of at most `chunk_points` points. Under
+// autograd with `checkpoint`, each call stores only its inputs and recomputes its chunks in the
+// backward pass (memory bounded by one chunk); gradients reach the model parameters (.grad) and,
+// through the cached frame tensors, the encoder and the transformer.
+class FrameField : public render::RadianceField {
+ public:
+  FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint = true);
+  torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) override;
+  torch::Tensor raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) override;
+
+ private:
+  TransHumanImpl& model_;
+  const FrameCache& cache_;
+  int64_t chunk_;
+  bool checkpoint_;
+};
+
+// Active parameters per module (SPEC 3.4): encoder (ResNet-18 to layer2), reduction + colour,
+// ViT (or the SPC network), heads (fc_0, FDI and heads), and "total" last.
+struct ParameterCount {
+  std::string module;
+  int64_t count = 0;
+};
+std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model);
+
+}  // namespace th::model

@@ -1,0 +1,114 @@
+#pragma once
+// SPEC 4: samples along rays, volume compositing, and the renderer that evaluates a radiance
+// field in chunks (bounded memory for any number of rays).
+
+#include <torch/types.h>
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <string>
+
+#include "core/config.hpp"
+
+namespace th::render {
+
+class BodyDistance;
+
+struct Rays {
+  torch::Tensor origins;     // (R, 3) world
+  torch::Tensor directions;  // (R, 3) world, not normalised (t is camera depth, SPEC 2.2)
+  torch::Tensor near, far;   // (R)
+
+  int64_t size() const { return origins.size(0); }
+  Rays slice(int64_t begin, int64_t end) const;
+  Rays index(const torch::Tensor& rows) const;
+};
+
+// Wall time per named stage, accumulated (benchmarks; null pointer = off).
+struct Profile {
+  std::map<std::string, double> seconds;
+  void add(const std::string& stage, double s) { seconds[stage] += s; }
+};
+
+class ScopedTimer {
+ public:
+  ScopedTimer(Profile* profile, const char* stage)
+      : profile_(profile), stage_(stage), start_(std::chrono::steady_clock::now()) {}
+  ~ScopedTimer() {
+    if (profile_)
+      profile_->add(stage_, std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
+  }
+  ScopedTimer(const ScopedTimer&) = delete;
+  ScopedTimer& operator=(const ScopedTimer&) = delete;
+
+ private:
+  Profile* profile_;
+  const char* stage_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+// What the renderer queries. raw = [rgb logits (3), density sigma_raw (1)].
+class RadianceField {
+ public:
+  virtual ~RadianceField() = default;
+  // pts, dirs: (N, 3) world sample positions and their rays' directions -> raw (N, 4).
+  virtual torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) = 0;
+  // As raw(), but the colour is evaluated only where sigma_raw > 0 (zero logits elsewhere):
+  // such samples get zero weight, so the image is the same (SPEC 4, progressive rendering).
+  virtual torch::Tensor raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) {
+    return raw(pts, dirs);
+  }
+};
+
+// z = near (1 - t) + far t, t = linspace(0, 1, S); with `stratified`, uniform jitter inside the
+// intervals between mid-points (training). near, far: (R) -> (R, S).
+torch::Tensor sample_depths(const torch::Tensor& near, const torch::Tensor& far, int64_t samples,
+                            bool stratified);
+
+struct Composite {
+  torch::Tensor rgb;      // (R, 3)
+  torch::Tensor depth;    // (R)
+  torch::Tensor acc;      // (R)
+  torch::Tensor weights;  // (R, S)
+};
+
+// SPEC 4 compositing: delta_i = (z_{i+1} - z_i) |d| (last: 1e10 |d|), alpha = 1 - exp(-relu(sigma)
+// delta), T_i = prod_{j<i} (1 - alpha_j + 1e-10), w = alpha T; rgb = sum w sigmoid(rgb_raw),
+// depth = sum w z, acc = sum w; black background.
+// raw: (R, S, 4), z: (R, S), directions: (R, 3).
+Composite composite(const torch::Tensor& raw, const torch::Tensor& z, const torch::Tensor& directions);
+
+struct RenderStats {
+  int64_t rays = 0;
+  int64_t points = 0;          // rays x samples
+  int64_t culled_points = 0;   // farther than the culling distance from the body
+  int64_t density_points = 0;  // points whose density was evaluated
+  int64_t color_points = 0;    // points whose colour was evaluated
+  int64_t empty_rays = 0;      // rays without any kept point (output 0)
+};
+
+struct RenderResult {
+  torch::Tensor rgb, depth, acc;  // (R, 3), (R), (R)
+  RenderStats stats;
+};
+
+// Renders every sample of every ray (training, and full rendering at inference). The field is
+// called on chunks of at most config.chunk_points points. With `cull` (training with
+// train.skip_far_points), samples farther than the culling distance from the body are skipped
+// (raw = 0), as at inference.
+class VolumeRenderer {
+ public:
+  explicit VolumeRenderer(const RenderConfig& config, Profile* profile = nullptr);
+
+  RenderResult render(RadianceField& field, const Rays& rays, bool stratified,
+                      const BodyDistance* cull = nullptr) const;
+
+  const RenderConfig& config() const { return config_; }
+
+ private:
+  RenderConfig config_;
+  Profile* profile_;
+};
+
+}  // namespace th::render

@@ -1,0 +1,67 @@
+#include "train/pipeline.hpp"
+
+#include <torch/torch.h>
+
+#include "render/progressive.hpp"
+
+namespace th::train {
+
+Tokens::Tokens(const GroupingConfig& config, const torch::Tensor& canonical)
+    : grouping_(body::make_grouping(config)), canonical_(canonical.to(torch::kFloat64)) {}
+
+torch::Tensor Tokens::labels(const data::FrameBody& body) {
+  return grouping_->labels(canonical_, body.smpl_vertices.to(torch::kFloat64));
+}
+
+model::FrameInputs frame_inputs(const data::Sample& s, const torch::Tensor& canonical,
+                                const torch::Tensor& labels, const torch::Device& device) {
+  auto f = [&](const torch::Tensor& t) { return t.to(device, torch::kFloat32); };
+  model::FrameInputs in;
+  in.ref_images = f(s.ref_images);
+  in.K = f(s.ref_K);
+  in.R = f(s.ref_R);
+  in.T = f(s.ref_T);
+  in.vertices = f(s.body.vertices);
+  in.Rh = f(s.body.Rh);
+  in.Th = f(s.body.Th);
+  in.A = f(s.body.A);
+  in.canonical = f(canonical);
+  in.visibility = s.visibility.to(device);
+  in.labels = labels.to(device, torch::kInt64);
+  in.num_tokens = labels.max().item<int64_t>() + 1;
+  in.check();
+  return in;
+}
+
+render::Rays sample_rays(const data::Sample& s, const torch::Device& device) {
+  auto f = [&](const torch::Tensor& t) { return t.to(device, torch::kFloat32); };
+  return {f(s.ray_o), f(s.ray_d), f(s.near), f(s.far)};
+}
+
+Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
+                       const model::FrameInputs& inputs, const render::Rays& rays, bool training,
+                       bool cull_in_training, render::Profile* profile) {
+  Rendered out;
+  out.cache = model.prepare(inputs);
+  model::FrameField field(model, out.cache, rc.chunk_points, /*checkpoint=*/training);
+  if (training) {
+    render::VolumeRenderer renderer(rc, profile);
+    out.result = renderer.render(field, rays, /*stratified=*/true,
+                                 cull_in_training ? out.cache.body.get() : nullptr);
+  } else if (rc.progressive) {
+    out.result = render::render_progressive(field, *out.cache.body, rays, rc, profile);
+  } else {
+    render::VolumeRenderer renderer(rc, profile);
+    out.result = renderer.render(field, rays, /*stratified=*/false);
+  }
+  return out;
+}
+
+torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,
+                            int64_t width) {
+  auto img = torch::zeros({height * width, 3}, rgb.options());
+  img.index_put_({pixel.to(rgb.device())}, rgb);
+  return img.reshape({height, width, 3});
+}
+
+}  // namespace th::train

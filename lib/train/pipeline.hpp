@@ -1,0 +1,51 @@
+#pragma once
+// The glue between the stages (STYLE: data flows one way): a dataset sample becomes the
+// network's frame inputs, the network a radiance field, the renderer its image. Shared by the
+// trainer, the evaluator and the free-viewpoint renderer.
+
+#include <torch/types.h>
+
+#include <memory>
+
+#include "body/grouping.hpp"
+#include "data/dataset.hpp"
+#include "model/inputs.hpp"
+#include "model/transhuman.hpp"
+#include "render/volume.hpp"
+
+namespace th::train {
+
+// Token labels per frame from the configured grouping (static groupings compute once).
+class Tokens {
+ public:
+  Tokens(const GroupingConfig& config, const torch::Tensor& canonical);
+  torch::Tensor labels(const data::FrameBody& body);
+
+ private:
+  std::unique_ptr<body::Grouping> grouping_;
+  torch::Tensor canonical_;
+};
+
+// Sample -> FrameInputs on `device` (float32).
+model::FrameInputs frame_inputs(const data::Sample& sample, const torch::Tensor& canonical,
+                                const torch::Tensor& labels, const torch::Device& device);
+
+// The sample's rays for the renderer, on `device`.
+render::Rays sample_rays(const data::Sample& sample, const torch::Device& device);
+
+// Renders the sample's rays with the model. Training: stratified samples, autograd on, every
+// sample evaluated (culled when train.skip_far_points). Inference: no grad, progressive when
+// render.progressive, full rendering otherwise.
+struct Rendered {
+  render::RenderResult result;
+  model::FrameCache cache;
+};
+Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& render_config,
+                       const model::FrameInputs& inputs, const render::Rays& rays, bool training,
+                       bool cull_in_training, render::Profile* profile = nullptr);
+
+// Scatters per-ray colours into an image (H, W, 3), black elsewhere.
+torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,
+                            int64_t width);
+
+}  // namespace th::train

@@ -1,0 +1,87 @@
+#include <catch2/catch.hpp>
+
+#include <cstdio>
+
+#include "body/smpl.hpp"
+#include "core/error.hpp"
+#include "data/dataset.hpp"
+#include "io/npy.hpp"
+#include "support/test_env.hpp"
+
+namespace fs = std::filesystem;
+using th::io::Value;
+
+namespace {
+
+// Writes <root>/<name>/annots.npy for `frames` frames of `cameras` cameras (ZJU-MoCap names).
+void write_annots(const fs::path& root, const std::string& name, int frames, int cameras) {
+  Value::List K, R, T, D, ims;
+  for (int c = 0; c < cameras; ++c) {
+    K.push_back(Value::array(torch::eye(3, torch::kFloat64) * 500));
+    R.push_back(Value::array(torch::eye(3, torch::kFloat64)));
+    T.push_back(Value::array(torch::zeros({3, 1}, torch::kFloat64)));
+    D.push_back(Value::array(torch::zeros({5, 1}, torch::kFloat64)));
+  }
+  char buf[64];
+  for (int f = 0; f < frames; ++f) {
+    Value::List paths;
+    for (int c = 0; c < cameras; ++c) {
+      std::snprintf(buf, sizeof buf, "Camera_B%d/%06d.jpg", c + 1, f);
+      paths.push_back(Value::str(buf));
+    }
+    ims.push_back(Value::dict({{Value::str("ims"), Value::list(paths)}}));
+  }
+  const Value cams = Value::dict({{Value::str("K"), Value::list(K)},
+                                  {Value::str("R"), Value::list(R)},
+                                  {Value::str("T"), Value::list(T)},
+                                  {Value::str("D"), Value::list(D)}});
+  fs::create_directories(root / name);
+  th::io::write_npy_value(root / name / "annots.npy",
+                          Value::dict({{Value::str("cams"), cams}, {Value::str("ims"), Value::list(ims)}}));
+}
+
+size_t samples(const fs::path& root, const std::string& split, const std::string& setting) {
+  th::DataConfig c;
+  c.root = root.string();
+  c.split_file = split;
+  auto smpl = std::make_shared<const th::body::SmplModel>();
+  return th::data::Dataset(c, setting, th::data::Dataset::Mode::Test, smpl).size();
+}
+
+}  // namespace
+
+TEST_CASE("ZJU-MoCap split sizes match the paper for annots of the real lengths", "[split]") {
+  const fs::path root = th::test::scratch_dir("zju_split_sizes");
+  // Frames and cameras of the released captures.
+  const std::vector<std::tuple<std::string, int, int>> humans = {
+      {"CoreView_313", 1470, 21}, {"CoreView_315", 2185, 21}, {"CoreView_377", 617, 23},
+      {"CoreView_386", 646, 23},  {"CoreView_387", 654, 23},  {"CoreView_390", 1171, 23},
+      {"CoreView_392", 556, 23},  {"CoreView_393", 658, 23},  {"CoreView_394", 859, 23},
+      {"CoreView_396", 1350, 23}};
+  for (const auto& [name, frames, cameras] : humans) write_annots(root, name, frames, cameras);
+  const std::string split = "data_splits/zju_mocap.yaml";
+  CHECK(samples(root, split, "training") == 7589);
+  CHECK(samples(root, split, "pose") == 798);
+  CHECK(samples(root, split, "identity") == 438);
+  CHECK(samples(root, split, "one_shot") == 438);
+  CHECK(samples(root, split, "fitting") > 0);
+}
+
+TEST_CASE("the H36M cross-dataset split has 54 target images", "[split]") {
+  const fs::path root = th::test::scratch_dir("h36m_split_sizes");
+  for (const auto& [name, frames] : std::vector<std::pair<std::string, int>>{
+           {"S1", 750}, {"S5", 1250}, {"S6", 750}, {"S7", 1500}, {"S8", 1250}, {"S9", 1300}, {"S11", 1000}})
+    write_annots(root / name, "Posing", frames, 4);  // Animatable NeRF's <S>/Posing layout
+  CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset") == 54);
+}
+
+TEST_CASE("an unknown setting or a missing human folder is named in the error", "[split]") {
+  const fs::path root = th::test::scratch_dir("split_errors");
+  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "poze"),
+                    Catch::Contains("no setting 'poze'") && Catch::Contains("identity"));
+  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
+                    Catch::Contains("CoreView_387") && Catch::Contains("does not exist"));
+  write_annots(root, "CoreView_387", 30, 5);
+  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
+                    Catch::Contains("view 7 does not exist for CoreView_387"));
+}

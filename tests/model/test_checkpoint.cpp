@@ -1,0 +1,126 @@
+// Importing checkpoints of the reference implementation (SPEC 8) written by Debian's
+// python3-torch, pretrained encoder weights, and our own weights.
+#include <catch2/catch.hpp>
+#include <torch/torch.h>
+
+#include <fstream>
+
+#include "core/error.hpp"
+#include "io/npy.hpp"
+#include "model/checkpoint_import.hpp"
+#include "model/frame_fixture.hpp"
+#include "model/transhuman.hpp"
+
+using namespace th;
+using namespace th::model;
+
+namespace {
+
+std::map<std::string, torch::Tensor> expected_tensors(const std::filesystem::path& dir) {
+  std::map<std::string, torch::Tensor> out;
+  std::ifstream m((dir / "manifest.txt").string());
+  std::string line;
+  while (std::getline(m, line)) {
+    std::istringstream in(line);
+    std::string name, dt;
+    in >> name >> dt;
+    std::vector<int64_t> shape;
+    for (int64_t s; in >> s;) shape.push_back(s);
+    out[name] = test::read_raw((dir / (name + ".bin")).string(), shape, dt == "f32" ? torch::kFloat : torch::kLong);
+  }
+  return out;
+}
+
+const std::filesystem::path& fixtures() {
+  static const auto dir = [] {
+    auto d = test::scratch_dir("checkpoint_import");
+    REQUIRE(test::run_python("tests/python/model_checkpoint.py", d.string()) == 0);
+    return d;
+  }();
+  return dir;
+}
+
+}  // namespace
+
+TEST_CASE("a reference .pth imports with equal tensors", "[model][checkpoint]") {
+  const auto& dir = fixtures();
+  const auto expected = expected_tensors(dir);
+  for (const char* file : {"full.pth", "bare.pth"}) {
+    INFO(file);
+    TransHuman model(ModelConfig{});
+    const auto report = import_reference_checkpoint(*model, dir / file);
+    CHECK(report.loaded.size() == model->named_parameters().size() + model->named_buffers().size());
+    // Unused entries are ignored: ResNet layer3/4 and fc, cls/mask tokens, PE buffers, xyzc_net.
+    const std::set<std::string> ignored(report.ignored.begin(), report.ignored.end());
+    CHECK(ignored.count("ViT.cls_token"));
+    CHECK(ignored.count("xyzc_net.conv0.subm0.weight"));
+    CHECK(ignored.count("encoder.model.layer4.1.bn2.running_var"));
+    int compared = 0;
+    for (const auto& p : model->named_parameters()) {
+      const auto ref = reference_name(p.key());
+      REQUIRE(expected.count(ref));
+      const auto e = expected.at(ref).reshape(p.value().sizes());
+      INFO(p.key() << " <- " << ref);
+      CHECK(torch::equal(p.value(), e));
+      ++compared;
+    }
+    for (const auto& b : model->named_buffers()) {
+      const auto ref = reference_name(b.key());
+      INFO(b.key() << " <- " << ref);
+      CHECK(torch::equal(b.value(), expected.at(ref).reshape(b.value().sizes()).to(b.value().dtype())));
+    }
+    CHECK(compared == static_cast<int>(model->named_parameters().size()));
+  }
+  // The name map of SPEC 8.
+  CHECK(reference_name("fdi.key0.weight") == "spatial_key_value_0.key_embed.weight");
+  CHECK(reference_name("fdi.value1.bias") == "spatial_key_value_1.value_embed.bias");
+  CHECK(reference_name("human.ViT.blocks.3.attn.qkv.weight") == "ViT.blocks.3.attn.qkv.weight");
+  CHECK(reference_name("heads.rgb_res_1.weight") == "rgb_res_1.weight");
+  CHECK(reference_name("encoder.model.layer2.0.downsample.1.running_mean") ==
+        "encoder.model.layer2.0.downsample.1.running_mean");
+}
+
+TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[model][checkpoint]") {
+  const auto& dir = fixtures();
+  TransHuman model(ModelConfig{});
+  const auto before = model->heads->fc_3->weight.clone();
+  CHECK_THROWS_AS(import_reference_checkpoint(*model, dir / "wrong_shape.pth"), Error);
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "wrong_shape.pth"),
+                    Catch::Contains("fc_3.weight") && Catch::Contains("[256, 255, 1]"));
+  CHECK(torch::equal(before, model->heads->fc_3->weight));  // nothing copied
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "missing.pth"), Catch::Contains("alpha_fc.bias"));
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "nonexistent.pth"), Catch::Contains("does not exist"));
+  const auto junk = dir / "junk.pth";
+  std::ofstream(junk.string()) << "not a zip file";
+  CHECK_THROWS_AS(import_reference_checkpoint(*model, junk), Error);
+  // An ablation with other shapes is refused the same way.
+  ModelConfig wo_rgb;
+  wo_rgb.fdi.raw_rgb = false;
+  TransHuman other(wo_rgb);
+  CHECK_THROWS_WITH(import_reference_checkpoint(*other, dir / "full.pth"), Catch::Contains("shape"));
+}
+
+TEST_CASE("the full checkpoint's other entries are readable", "[model][checkpoint]") {
+  const auto all = read_torch_state_dict(fixtures() / "full.pth", "");
+  CHECK(all.count("net.fc_0.weight"));
+  CHECK(all.at("epoch").item<int64_t>() == 2100);
+  CHECK(all.at("recorder.step").item<int64_t>() == 1234);
+}
+
+TEST_CASE("pretrained ResNet-18 weights load from an npz; own weights round-trip", "[model][checkpoint]") {
+  const auto dir = test::scratch_dir("checkpoint_own");
+  TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());
+  save_model_weights(*a, dir / "model.pt");
+  load_model_weights(*b, dir / "model.pt");
+  for (const auto& p : a->named_parameters()) CHECK(torch::equal(p.value(), b->named_parameters()[p.key()]));
+  // An npz with torchvision names (what scripts/export_pretrained.py writes).
+  std::map<std::string, torch::Tensor> resnet;
+  for (const auto& p : a->encoder->model->named_parameters()) resnet[p.key()] = torch::randn_like(p.value());
+  for (const auto& q : a->encoder->model->named_buffers()) resnet[q.key()] = q.value().clone();
+  io::write_npz(dir / "resnet18.npz", resnet);
+  load_pretrained_encoder(*b->encoder, dir / "resnet18.npz");
+  CHECK(torch::equal(b->encoder->model->conv1->weight, resnet.at("conv1.weight")));
+  resnet.erase("layer1.0.conv1.weight");
+  io::write_npz(dir / "broken.npz", resnet);
+  CHECK_THROWS_WITH(load_pretrained_encoder(*b->encoder, dir / "broken.npz"), Catch::Contains("layer1.0.conv1.weight"));
+}
