@@ -8,6 +8,8 @@
 #include <CLI/CLI.hpp>
 #include <torch/torch.h>
 
+#include <malloc.h>
+
 #include <chrono>
 #include <cmath>
 #include <fstream>
@@ -178,12 +180,21 @@ std::string fmt(double v, int prec = 1) {
   return s.str();
 }
 
-void shares(Report& r, const render::Profile& p, double total) {
+void shares_into(std::string& s, const render::Profile& p, double total) {
   std::vector<std::pair<std::string, double>> v(p.seconds.begin(), p.seconds.end());
   std::sort(v.begin(), v.end(), [](auto& a, auto& b) { return a.second > b.second; });
-  std::string s = "  time per stage: ";
-  for (const auto& [k, sec] : v) s += k + " " + fmt(100 * sec / total) + "% (" + fmt(sec, 2) + " s), ";
-  r.line(s.substr(0, s.size() - 2));
+  double listed = 0;
+  for (const auto& [k, sec] : v) {
+    s += " " + k + " " + fmt(100 * sec / total) + "% (" + fmt(sec, 2) + " s),";
+    listed += sec;
+  }
+  s += " other " + fmt(100 * std::max(0.0, total - listed) / total) + "%";
+}
+
+void shares(Report& r, const render::Profile& p, double total) {
+  std::string s = "  time per stage:";
+  shares_into(s, p, total);
+  r.line(s);
 }
 
 }  // namespace
@@ -200,7 +211,15 @@ int main(int argc, char** argv) {
   cli.add_flag("--quick", quick, "small image and fewer repetitions (smoke run)");
   std::vector<std::string> sections{"points", "train", "render"};
   cli.add_option("--sections", sections, "which parts to run: points train render");
+  bool system_malloc = false;
+  cli.add_flag("--system-malloc", system_malloc, "keep glibc's default mmap use for large blocks");
   CLI11_PARSE(cli, argc, argv);
+  // Per-chunk tensors are tens of MB: glibc would map and unmap them every time (page faults
+  // dominate the system time). Serve them from the heap and keep it.
+  if (!system_malloc) {
+    mallopt(M_MMAP_MAX, 0);
+    mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max());
+  }
   const int nthreads = runtime::set_threads(threads);
   const int64_t size = quick ? 128 : 512;
 
@@ -210,6 +229,7 @@ int main(int argc, char** argv) {
   r.line("LibTorch " + std::string(TORCH_VERSION) + ", " + std::to_string(nthreads) + " threads, BLAS " +
          runtime::detect_blas().name + "; synthetic frame: 3 reference views " + std::to_string(size) + "x" +
          std::to_string(size) + ", 6890 body vertices, 300 tokens, default model (ViT depth 12), random weights.");
+  r.line(std::string("Allocator: glibc malloc") + (system_malloc ? " (defaults)" : " with M_MMAP_MAX=0, no trimming") + ".");
   r.line("Memory: peak RSS delta of the measured section (VmHWM after reset via /proc/self/clear_refs, minus VmRSS before).");
   r.line("");
 
@@ -254,6 +274,7 @@ int main(int argc, char** argv) {
     const int64_t total = quick ? 16384 : 65536;
     const auto pts = body_points(scene, *cache_ng.body, total, &dirs);
     const double min_time = quick ? 0.3 : 2.0;
+    std::vector<std::string> stage_lines;
     for (const int64_t chunk : chunks) {
       if (chunk > pts.size(0)) continue;
       auto rate = [&](auto&& fn) {
@@ -268,9 +289,16 @@ int main(int argc, char** argv) {
         return done / seconds_since(t0);
       };
       double fwd, dfirst, fb, train;
+      render::Profile fwd_profile;
       {
         torch::NoGradGuard ng;
+        net->set_profile(&fwd_profile);
+        const auto t_fwd = Clock::now();
         fwd = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward(cache_ng, p, d); });
+        const double fwd_seconds = seconds_since(t_fwd);
+        net->set_profile(nullptr);
+        stage_lines.push_back("chunk " + std::to_string(chunk) + ":");
+        shares_into(stage_lines.back(), fwd_profile, fwd_seconds);
         dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward_density_first(cache_ng, p, d); });
       }
       // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded).
@@ -295,7 +323,10 @@ int main(int argc, char** argv) {
              fmt(train, 0) + " | " + fmt(fb_mem, 0) + " |");
     }
     r.line("");
+    r.line("");
     r.line("Forward: full colour for every point. Density-first: colour only where sigma > 0 (about half here).");
+    r.line("Forward time per stage:");
+    for (const auto& l : stage_lines) r.line("- " + l);
     r.line("");
   }
   }

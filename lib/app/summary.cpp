@@ -2,6 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include "body/smpl.hpp"
+#include "data/dataset.hpp"
+#include "model/transhuman.hpp"
+
 namespace th::app {
 
 void print_summary(const RunContext& ctx) {
@@ -9,12 +13,26 @@ void print_summary(const RunContext& ctx) {
   spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", c.data.dataset,
                c.data.root, c.data.split_file, c.data.train_setting, c.data.test_setting,
                c.data.ratio);
+  // The data index: splits and annots only (no images are read).
+  try {
+    auto smpl = data::load_body_model(c.data);
+    spdlog::info("body model: {} vertices, {} faces", smpl->num_vertices(), smpl->faces.size(0));
+    for (const auto& setting : {c.data.train_setting, c.data.test_setting}) {
+      data::Dataset ds(c.data, setting, data::Dataset::Mode::Test, smpl);
+      spdlog::info("  '{}': {} samples from {} humans", setting, ds.size(), ds.humans().size());
+    }
+  } catch (const Error& e) {
+    spdlog::warn("data not available: {}", e.what());
+  }
   const auto& m = c.model;
   spdlog::info("model: {} | grouping {} (Nt {}) | TransHE {} ({} PE) | DPaRF Nk {} ({}) | FDI a={} "
                "h={} rgb={}",
                m.representation, m.grouping.kind, m.grouping.num_tokens,
                m.transhe.enabled ? "on" : "off", m.transhe.position, m.dparf.nk,
                m.dparf.coordinate, m.fdi.appearance, m.fdi.human, m.fdi.raw_rgb);
+  model::TransHuman net(m, c.render.cull_distance);
+  for (const auto& p : model::parameter_counts(*net))
+    spdlog::info("  parameters {:<44} {:>11}", p.module, with_commas(p.count));
   spdlog::info("render: {} samples/ray | progressive {} | chunk {} points", c.render.samples,
                c.render.progressive, c.render.chunk_points);
   spdlog::info("train: {} epochs x {} iters | lr {} (warm-up {} epochs, cosine to {}) | clip {} | "

@@ -129,6 +129,7 @@ struct TrainConfig {
   int val_every_epochs = 10;
   int val_views = 2;
   int log_every_steps = 10;
+  double max_minutes = 0;           // stop (with a checkpoint) after this wall time; 0: no limit
 };
 
 // ---- evaluation (SPEC 6) -----------------------------------------------------------------
@@ -251,6 +252,7 @@ template <class V> void visit_fields(V& v, TrainConfig& c) {
   v("val_every_epochs", c.val_every_epochs);
   v("val_views", c.val_views);
   v("log_every_steps", c.log_every_steps);
+  v("max_minutes", c.max_minutes);
 }
 template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("setting", c.setting);

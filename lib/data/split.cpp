@@ -30,15 +30,19 @@ T get(const YAML::Node& node, const char* key, const std::string& where) {
   }
 }
 
-// A view list: [i, ...] or the keyword (`random` / `all`).
+// A view list: [i, ...], or the keyword (`random` / `all`) or an empty list for it.
 bool read_views(const YAML::Node& node, const char* key, const char* keyword,
                 std::vector<int>& views, const std::string& where) {
   const YAML::Node v = node[key];
   if (!v) fail(where, ": missing '", key, "'");
   if (v.IsScalar() && v.Scalar() == keyword) return true;
   if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of camera indices or '", keyword, "'");
-  views = v.as<std::vector<int>>();
-  return false;
+  try {
+    views = v.as<std::vector<int>>();
+  } catch (const YAML::Exception&) {
+    fail(where, ": '", key, "' must be a list of camera indices");
+  }
+  return views.empty();
 }
 
 }  // namespace
@@ -82,7 +86,8 @@ SplitSetting load_split(const std::filesystem::path& file, const std::string& na
       fail(where, ": 'humans' must be a non-empty list");
     for (size_t i = 0; i < humans.size(); ++i) {
       const std::string w = where + ", humans[" + std::to_string(i) + "]";
-      HumanRange h{get<std::string>(humans[i], "name", w), get<int>(humans[i], "begin", w),
+      const char* name_key = humans[i]["human"] ? "human" : "name";
+      HumanRange h{get<std::string>(humans[i], name_key, w), get<int>(humans[i], "begin", w),
                    get<int>(humans[i], "ni", w), get<int>(humans[i], "interval", w)};
       if (h.begin < 0 || h.ni <= 0 || h.interval <= 0)
         fail(w, ": begin must be >= 0, ni and interval > 0");

@@ -1,6 +1,11 @@
 #include "model/dparf.hpp"
 
+#include <ATen/Parallel.h>
 #include <torch/torch.h>
+
+#include <cmath>
+#include <limits>
+#include <vector>
 
 #include "model/positional_encoding.hpp"
 #include "model/transhe.hpp"
@@ -42,7 +47,121 @@ torch::Tensor DPaRF::field_encodings(const TokenFrames& frames, const torch::Ten
   return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true).view({n, k, -1});
 }
 
+namespace {
+
+// Per point: the nk nearest origins (exact squared distances, nearest first, ties by index),
+// softmax(-d / T) weights, local coordinates and the arguments x * f + phase of their encoding.
+template <class T>
+void nearest_fields(const T* xs, const T* origins, const T* rotations, int64_t nt, int64_t nk, double temperature,
+                    const T* freqs, const T* phases, int64_t nf2, int64_t n_begin, int64_t n_end, int64_t* out_idx,
+                    T* out_w, T* out_local, T* out_args) {
+  std::vector<T> best_d(nk);
+  std::vector<int64_t> best_i(nk);
+  for (int64_t n = n_begin; n < n_end; ++n) {
+    const T x = xs[3 * n], y = xs[3 * n + 1], z = xs[3 * n + 2];
+    int64_t count = 0;
+    for (int64_t t = 0; t < nt; ++t) {
+      const T dx = x - origins[3 * t], dy = y - origins[3 * t + 1], dz = z - origins[3 * t + 2];
+      const T d2 = dx * dx + dy * dy + dz * dz;
+      if (count == nk && !(d2 < best_d[nk - 1])) continue;
+      int64_t pos = count < nk ? count++ : nk - 1;
+      while (pos > 0 && d2 < best_d[pos - 1]) {
+        best_d[pos] = best_d[pos - 1];
+        best_i[pos] = best_i[pos - 1];
+        --pos;
+      }
+      best_d[pos] = d2;
+      best_i[pos] = t;
+    }
+    int64_t* idx = out_idx + n * nk;
+    T* w = out_w + n * nk;
+    T max_logit = -std::numeric_limits<T>::infinity();
+    for (int64_t k = 0; k < nk; ++k) {
+      const int64_t t = best_i[k];
+      idx[k] = t;
+      const T d[3] = {x - origins[3 * t], y - origins[3 * t + 1], z - origins[3 * t + 2]};
+      w[k] = -std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / static_cast<T>(temperature);
+      max_logit = std::max(max_logit, w[k]);
+      if (out_local) {
+        const T* R = rotations + 9 * t;
+        T* l = out_local + (n * nk + k) * 3;
+        for (int i = 0; i < 3; ++i) l[i] = d[0] * R[i] + d[1] * R[3 + i] + d[2] * R[6 + i];
+        T* a = out_args + (n * nk + k) * nf2 * 3;
+        for (int64_t f = 0; f < nf2; ++f)
+          for (int i = 0; i < 3; ++i) {
+            const T product = l[i] * freqs[f];  // rounded, then the phase added (no FMA)
+            a[f * 3 + i] = product + phases[f];
+          }
+      }
+    }
+    T sum = 0;
+    for (int64_t k = 0; k < nk; ++k) sum += (w[k] = std::exp(w[k] - max_logit));
+    for (int64_t k = 0; k < nk; ++k) w[k] /= sum;
+  }
+}
+
+}  // namespace
+
 FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) const {
+  TORCH_CHECK(xs.dim() == 2 && xs.size(1) == 3, "DPaRF points must be (N, 3), got ", xs.sizes());
+  if (!xs.device().is_cpu() || xs.requires_grad()) return query_tensors(frames, xs);
+  const int64_t nk = config_.nk, nt = frames.origins.size(0), n = xs.size(0);
+  TORCH_CHECK(nt >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", nt);
+  const bool relative = config_.coordinate == "relative";
+  const int64_t nf2 = 2 * config_.pe_freqs;
+  const auto x = xs.contiguous();
+  const auto O = frames.origins.to(x.dtype()).contiguous();
+  const auto R = frames.rotations.to(x.dtype()).reshape({nt, 9}).contiguous();
+  const auto freqs = pe_frequencies(config_.pe_freqs, x.options()).contiguous();
+  const auto phases = pe_phases(config_.pe_freqs, x.options()).contiguous();
+  FieldQuery q;
+  q.index = torch::empty({n, nk}, x.options().dtype(torch::kLong));
+  q.weight = torch::empty({n, nk}, x.options());
+  torch::Tensor local, args;
+  if (relative) {
+    local = torch::empty({n, nk, 3}, x.options());
+    args = torch::empty({n, nk, nf2, 3}, x.options());
+  }
+  AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "dparf_query", [&] {
+    at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
+      nearest_fields<scalar_t>(x.data_ptr<scalar_t>(), O.data_ptr<scalar_t>(), R.data_ptr<scalar_t>(), nt, nk,
+                               config_.softmax_temperature, freqs.data_ptr<scalar_t>(),
+                               phases.data_ptr<scalar_t>(), nf2, begin, end, q.index.data_ptr<int64_t>(),
+                               q.weight.data_ptr<scalar_t>(), relative ? local.data_ptr<scalar_t>() : nullptr,
+                               relative ? args.data_ptr<scalar_t>() : nullptr);
+    });
+  });
+  if (config_.coordinate == "absolute") {
+    q.coords = sincos_encoding(x, config_.pe_freqs, true);
+  } else if (relative) {
+    // g_k = [l_k, sin(args)]; coords = sum_k w_k g_k.
+    args.sin_();
+    const int64_t G = 3 + nf2 * 3;
+    q.coords = torch::empty({n, G}, x.options());
+    AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "dparf_coords", [&] {
+      const scalar_t* w = q.weight.data_ptr<scalar_t>();
+      const scalar_t* l = local.data_ptr<scalar_t>();
+      const scalar_t* s = args.data_ptr<scalar_t>();
+      scalar_t* c = q.coords.data_ptr<scalar_t>();
+      at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; ++i) {
+          scalar_t* out = c + i * G;
+          for (int64_t j = 0; j < G; ++j) out[j] = 0;
+          for (int64_t k = 0; k < nk; ++k) {
+            const scalar_t wk = w[i * nk + k];
+            const scalar_t* lk = l + (i * nk + k) * 3;
+            const scalar_t* sk = s + (i * nk + k) * nf2 * 3;
+            for (int j = 0; j < 3; ++j) out[j] += wk * lk[j];
+            for (int64_t j = 0; j < nf2 * 3; ++j) out[3 + j] += wk * sk[j];
+          }
+        }
+      });
+    });
+  }
+  return q;
+}
+
+FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& xs) const {
   TORCH_CHECK(xs.dim() == 2 && xs.size(1) == 3, "DPaRF points must be (N, 3), got ", xs.sizes());
   const auto& O = frames.origins;
   const int64_t nk = config_.nk;

@@ -33,8 +33,11 @@ class DPaRF {
   // Width G of the coordinate encoding: 63 for relative/absolute (10 frequencies), 0 for none.
   int64_t coord_dim() const;
 
-  // xs: (N, 3) points in the SMPL frame.
+  // xs: (N, 3) points in the SMPL frame. On CPU one pass per point (nearest fields, weights,
+  // local coordinates, encoding arguments) plus one vectorised sin; elsewhere tensor ops
+  // (query_tensors, the same formulas).
   FieldQuery query(const TokenFrames& frames, const torch::Tensor& xs) const;
+  FieldQuery query_tensors(const TokenFrames& frames, const torch::Tensor& xs) const;
 
   // Local coordinates l_k = Rc(k)^T (xs - Oc(k)) of the fields in `index`: (N, Nk, 3).
   static torch::Tensor local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,

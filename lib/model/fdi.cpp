@@ -1,10 +1,101 @@
 #include "model/fdi.hpp"
 
+#include <ATen/Parallel.h>
+
 #include <cmath>
+#include <limits>
+#include <vector>
 
 namespace th::model {
 
 namespace F = torch::nn::functional;
+
+namespace {
+
+// Row pointers of an (N, V, C) tensor whose last dimension is contiguous.
+template <class T>
+struct Rows {
+  T* data;
+  int64_t sn, sv;
+  explicit Rows(const torch::Tensor& t) : data(t.data_ptr<T>()), sn(t.stride(0)), sv(t.stride(1)) {}
+  T* at(int64_t n, int64_t v) const { return data + n * sn + v * sv; }
+};
+
+template <class T>
+T dot(const T* a, const T* b, int64_t c) {
+  T s = 0;
+  for (int64_t i = 0; i < c; ++i) s += a[i] * b[i];
+  return s;
+}
+
+template <class T>
+void axpy(T* y, T a, const T* x, int64_t c) {
+  for (int64_t i = 0; i < c; ++i) y[i] += a * x[i];
+}
+
+struct ViewAttention : torch::autograd::Function<ViewAttention> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& q,
+                               const torch::Tensor& k, const torch::Tensor& u, const torch::Tensor& r) {
+    const int64_t N = q.size(0), V = q.size(1), D = q.size(2), C = u.size(2);
+    const double scale = 1.0 / std::sqrt(static_cast<double>(D));
+    auto out = r.contiguous().clone();
+    auto att = torch::empty({N, V, V}, q.options());
+    AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "view_attention", [&] {
+      const Rows<scalar_t> Q(q), Kr(k), U(u), O(out);
+      scalar_t* A = att.data_ptr<scalar_t>();
+      at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
+        for (int64_t n = b; n < e; ++n) {
+          scalar_t* a = A + n * V * V;
+          for (int64_t v = 0; v < V; ++v) {
+            scalar_t m = -std::numeric_limits<scalar_t>::infinity(), s = 0;
+            for (int64_t j = 0; j < V; ++j) m = std::max(m, a[v * V + j] = dot(Q.at(n, v), Kr.at(n, j), D) * static_cast<scalar_t>(scale));
+            for (int64_t j = 0; j < V; ++j) s += (a[v * V + j] = std::exp(a[v * V + j] - m));
+            for (int64_t j = 0; j < V; ++j) axpy(O.at(n, v), a[v * V + j] /= s, U.at(n, j), C);
+          }
+        }
+      });
+    });
+    ctx->save_for_backward({q, k, u, att});
+    return out;
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &q = saved[0], &k = saved[1], &u = saved[2], &att = saved[3];
+    const auto g = grads[0].contiguous();
+    const int64_t N = q.size(0), V = q.size(1), D = q.size(2), C = u.size(2);
+    const double scale = 1.0 / std::sqrt(static_cast<double>(D));
+    auto gq = torch::zeros({N, V, D}, q.options()), gk = torch::zeros({N, V, D}, q.options());
+    auto gu = torch::zeros({N, V, C}, u.options());
+    AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "view_attention_backward", [&] {
+      const Rows<scalar_t> Q(q), Kr(k), U(u), G(g), GQ(gq), GK(gk), GU(gu);
+      const scalar_t* A = att.data_ptr<scalar_t>();
+      at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
+        std::vector<scalar_t> ga(V * V);
+        for (int64_t n = b; n < e; ++n) {
+          const scalar_t* a = A + n * V * V;
+          for (int64_t v = 0; v < V; ++v) {
+            scalar_t inner = 0;
+            for (int64_t j = 0; j < V; ++j) {
+              axpy(GU.at(n, j), a[v * V + j], G.at(n, v), C);
+              ga[v * V + j] = dot(G.at(n, v), U.at(n, j), C);
+              inner += a[v * V + j] * ga[v * V + j];
+            }
+            for (int64_t j = 0; j < V; ++j) {
+              const scalar_t gl = a[v * V + j] * (ga[v * V + j] - inner) * static_cast<scalar_t>(scale);
+              axpy(GQ.at(n, v), gl, Kr.at(n, j), D);
+              axpy(GK.at(n, j), gl, Q.at(n, v), D);
+            }
+          }
+        }
+      });
+    });
+    return {gq, gk, gu, g};
+  }
+};
+
+}  // namespace
 
 FDIImpl::FDIImpl(const FDIConfig& config_, int64_t pixel_channels) : config(config_) {
   if (config.appearance) {
@@ -23,6 +114,13 @@ FDIImpl::FDIImpl(const FDIConfig& config_, int64_t pixel_channels) : config(conf
 torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k) {
   const double scale = 1.0 / std::sqrt(static_cast<double>(q.size(2)));
   return torch::softmax(torch::bmm(q, k.transpose(1, 2)) * scale, 2);
+}
+
+torch::Tensor FDIImpl::attend(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& u,
+                              const torch::Tensor& r) {
+  const bool last_contiguous = q.stride(2) == 1 && k.stride(2) == 1 && u.stride(2) == 1 && r.stride(2) == 1;
+  if (!q.device().is_cpu() || !last_contiguous) return torch::baddbmm(r, attention(q, k), u);
+  return ViewAttention::apply(q, k, u, r);
 }
 
 torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a) {
@@ -62,12 +160,11 @@ torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s
   if (config.appearance && config.human) {
     const auto kv = F::linear(a, f.w0, f.b0);  // (N, V, 128 + 256)
     const auto qr = F::linear(s, f.w1, f.b1);
-    const auto att = attention(qr.narrow(2, 0, 128), kv.narrow(2, 0, 128));
-    pre = torch::baddbmm(qr.narrow(2, 128, 256), att, kv.narrow(2, 128, 256));
+    pre = attend(qr.narrow(2, 0, 128), kv.narrow(2, 0, 128), kv.narrow(2, 128, 256), qr.narrow(2, 128, 256));
   } else if (config.appearance) {
     const auto kv = F::linear(a, f.w0, f.b0);
     const auto k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256);
-    pre = torch::baddbmm(u + fc_1->bias, attention(k, k), u);
+    pre = attend(k, k, u, u + fc_1->bias);
   } else {
     pre = F::linear(s, f.w1, f.b1);
   }

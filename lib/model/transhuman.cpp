@@ -1,10 +1,12 @@
 #include "model/transhuman.hpp"
 
+#include <spdlog/spdlog.h>
 #include <torch/csrc/autograd/custom_function.h>
 
 #include <algorithm>
 
 #include "core/error.hpp"
+#include "model/checkpoint_import.hpp"
 #include "model/positional_encoding.hpp"
 #include "render/body_distance.hpp"
 
@@ -24,6 +26,12 @@ torch::Tensor view_ids(int64_t n, int64_t V, const torch::Device& device) {
 TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
     : config_(config), cull_distance_(cull_distance) {
   encoder = register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb));
+  if (!config.encoder.pretrained.empty()) {
+    load_pretrained_encoder(*encoder, config.encoder.pretrained);
+    spdlog::info("encoder: ImageNet ResNet-18 weights from {}", config.encoder.pretrained);
+  } else {
+    spdlog::info("encoder: random initialisation (model.encoder.pretrained is empty)");
+  }
   if (config.fdi.human) human = register_module("human", make_human_representation(config));
   fdi = register_module("fdi", FDI(config.fdi, encoder->pixel_channels()));
   heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));

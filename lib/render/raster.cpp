@@ -38,9 +38,10 @@ Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces,
     cp = cull.data_ptr<bool>();
   }
 
+  // The z-test runs on inverse depth (larger is nearer; 0 is empty) and the barycentrics are
+  // kept unnormalised until the end, so that only the final pass divides.
   Raster out;
-  out.depth = torch::full({height, width}, std::numeric_limits<float>::infinity(),
-                          torch::kFloat32);
+  out.depth = torch::zeros({height, width}, torch::kFloat32);
   out.face_id = torch::full({height, width}, -1, torch::kInt32);
   out.bary = torch::zeros({height, width, 3}, torch::kFloat32);
   float* depth = out.depth.data_ptr<float>();
@@ -83,47 +84,62 @@ Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces,
     const double inv_area = 1.0 / area;
     // Edge functions are affine in (x, y): l_c(x, y) = a_c x + b_c y + c_c, normalised by the
     // area so that l_0 + l_1 + l_2 = 1 (screen-space barycentrics).
-    double ea[3], eb[3], ec[3];
+    double ea[3], eb[3], ec[3], inv_ea[3];
     for (int c = 0; c < 3; ++c) {
       const int i = (c + 1) % 3, j = (c + 2) % 3;
       ea[c] = (sv[i] - sv[j]) * inv_area;
       eb[c] = (su[j] - su[i]) * inv_area;
       ec[c] = (su[i] * sv[j] - su[j] * sv[i]) * inv_area;
+      inv_ea[c] = ea[c] != 0 ? 1.0 / ea[c] : 0.0;
     }
     for (int y = y0; y <= y1; ++y) {
       // The span of this row where all three edge functions are >= 0 (one pixel of slack on
       // each side; the exact test below decides).
       double lo = x0, hi = x1;
       bool empty = false;
+      double row[3];
       for (int c = 0; c < 3; ++c) {
-        const double row = eb[c] * y + ec[c];
+        row[c] = eb[c] * y + ec[c];
         if (ea[c] > 0) {
-          lo = std::max(lo, std::floor(-row / ea[c]) - 1);
+          lo = std::max(lo, std::floor(-row[c] * inv_ea[c]) - 1);
         } else if (ea[c] < 0) {
-          hi = std::min(hi, std::ceil(-row / ea[c]) + 1);
-        } else if (row < 0) {
+          hi = std::min(hi, std::ceil(-row[c] * inv_ea[c]) + 1);
+        } else if (row[c] < 0) {
           empty = true;
         }
       }
       if (empty || lo > hi) continue;
+      float* drow = depth + static_cast<int64_t>(y) * width;
       for (int x = int(lo); x <= int(hi); ++x) {
-        const double l0 = ea[0] * x + eb[0] * y + ec[0];
-        const double l1 = ea[1] * x + eb[1] * y + ec[1];
-        const double l2 = ea[2] * x + eb[2] * y + ec[2];
+        const double l0 = ea[0] * x + row[0];
+        const double l1 = ea[1] * x + row[1];
+        const double l2 = ea[2] * x + row[2];
         if (l0 < 0 || l1 < 0 || l2 < 0) continue;
         // Perspective-correct interpolation: 1/z is affine in screen space.
         const double w0 = l0 * iz[0], w1 = l1 * iz[1], w2 = l2 * iz[2];
-        const double inv_depth = w0 + w1 + w2;
-        const double z = 1.0 / inv_depth;
+        const float inv_depth = static_cast<float>(w0 + w1 + w2);
+        if (!(inv_depth > drow[x])) continue;
+        drow[x] = inv_depth;
         const int64_t pix = static_cast<int64_t>(y) * width + x;
-        if (!(z < depth[pix])) continue;
-        depth[pix] = static_cast<float>(z);
         ids[pix] = static_cast<int32_t>(t);
-        bary[3 * pix + 0] = static_cast<float>(w0 * z);
-        bary[3 * pix + 1] = static_cast<float>(w1 * z);
-        bary[3 * pix + 2] = static_cast<float>(w2 * z);
+        bary[3 * pix + 0] = static_cast<float>(w0);
+        bary[3 * pix + 1] = static_cast<float>(w1);
+        bary[3 * pix + 2] = static_cast<float>(w2);
       }
     }
+  }
+
+  // Inverse depth -> depth, unnormalised -> normalised barycentrics.
+  const int64_t pixels = int64_t(width) * height;
+  for (int64_t pix = 0; pix < pixels; ++pix) {
+    if (ids[pix] < 0) {
+      depth[pix] = std::numeric_limits<float>::infinity();
+      continue;
+    }
+    float* b = bary + 3 * pix;
+    const float sum = b[0] + b[1] + b[2];
+    depth[pix] = 1.0f / sum;
+    b[0] /= sum, b[1] /= sum, b[2] /= sum;
   }
   return out;
 }

@@ -33,7 +33,7 @@ struct SynthImageConfig {
   int width = 512;
   int height = 512;
   int supersample = 2;     // anti-aliasing: s x s samples per pixel
-  int jpeg_quality = 80;
+  int jpeg_quality = 75;
 };
 
 struct SynthNoiseConfig {

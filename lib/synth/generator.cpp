@@ -194,10 +194,13 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   fs::create_directories(out);
   LibraryThreads library_threads(1);
 
-  // The body model (SPEC 1.5), written in both formats.
+  // The body model (SPEC 1.5), written in both formats. Its pose blend shapes are zero and
+  // are stored as float32, which halves the largest array (readers convert to float64).
   const BodyTemplate body = build_body_template();
-  body::save_smpl_npz(out / "smpl_model.npz", body.model);
-  body::save_smpl_pkl(out / "smpl_model.pkl", body.model);
+  body::SmplModel stored = body.model;
+  stored.posedirs = stored.posedirs.to(torch::kFloat32);
+  body::save_smpl_npz(out / "smpl_model.npz", stored);
+  body::save_smpl_pkl(out / "smpl_model.pkl", stored);
 
   // People, rigs, motion and noise, drawn serially from their own random streams.
   const uint64_t seed = static_cast<uint64_t>(c.seed);

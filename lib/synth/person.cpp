@@ -382,8 +382,8 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
   const uint64_t slot = start + uint64_t(index);
   Outfit o;
   o.sleeve = static_cast<Sleeve>(slot % 3);
-  o.lower = static_cast<Lower>((slot / 3 + slot) % 4);
-  o.hair = static_cast<HairStyle>((slot / 2 + slot) % 4);
+  o.lower = static_cast<Lower>(slot % 4);
+  o.hair = static_cast<HairStyle>((3 * slot + slot / 4) % 4);
   o.shirt_loose = rng.uniform(0.005, 0.05);
   o.shirt_hem = rng.uniform(-0.02, 0.06);
   o.leg_wide = rng.uniform(0.0, 0.02);
@@ -420,8 +420,12 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
   const Rgb lower2 = hsv(hue + 0.15f, 0.3f, 0.95f);
   const Pattern lower_patterns[] = {Pattern::Denim, Pattern::Solid, Pattern::Checks,
                                     Pattern::Stripes};
-  Pattern lower_pattern = lower_patterns[(slot / 4 + index) % 4];
-  if (o.lower == Lower::Skirt && lower_pattern == Pattern::Denim) lower_pattern = Pattern::Dots;
+  Pattern lower_pattern = lower_patterns[(slot / 4 + slot / 2) % 4];
+  if (o.lower == Lower::Skirt) {
+    const Pattern skirt_patterns[] = {Pattern::Solid, Pattern::Checks, Pattern::Stripes,
+                                      Pattern::Dots};
+    lower_pattern = skirt_patterns[(slot / 4) % 4];
+  }
 
   const std::vector<Rgb> shoes = {{0.1f, 0.1f, 0.1f}, {0.9f, 0.9f, 0.88f},
                                   {0.4f, 0.25f, 0.12f}, {0.7f, 0.15f, 0.15f}};

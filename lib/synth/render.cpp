@@ -30,10 +30,10 @@ Rgb studio_colour(const double* c, const double* d, float* floor_xy) {
     const double x = c[0] + t * d[0], y = c[1] + t * d[1];
     if (std::hypot(x, y) < kWallRadius) {
       floor_xy[0] = float(x), floor_xy[1] = float(y);
-      const int tile = (int(std::floor(x / 0.5)) + int(std::floor(y / 0.5))) & 1;
-      float g = tile ? 0.44f : 0.42f;
-      const double r = std::hypot(x, y);
-      if (std::abs(r - 1.6) < 0.025) g = 0.75f;  // the capture-area circle
+      // A plain floor with a painted circle: texture here would cost JPEG bytes in every
+      // image and teach the networks nothing about people.
+      float g = 0.43f;
+      if (std::abs(std::hypot(x, y) - 1.6) < 0.025) g = 0.75f;
       return {g * 0.98f, g, g * 1.03f};
     }
   }
@@ -95,11 +95,30 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
   r.alpha = cv::Mat::zeros(height, width, CV_32F);
   r.labels = cv::Mat::zeros(height, width, CV_8U);
 
-  // Contact shadow on the floor around the person's ground point.
-  for (int y = 0; y < height; ++y) {
+  // Contact shadow on the floor within 0.8 m of the person's ground point: only the image box
+  // of that disc (its outline projected and distorted) is visited.
+  cv::Rect shadow_box(0, 0, width, height);
+  {
+    std::vector<double> rim;
+    for (int i = 0; i < 16; ++i) {
+      const double a = 2 * kPi * i / 16;
+      rim.insert(rim.end(), {ground_x + 0.8 * std::cos(a), ground_y + 0.8 * std::sin(a), 0.0});
+    }
+    auto cam = geometry::world_to_camera(torch::tensor(rim, torch::kFloat64).reshape({16, 3}),
+                                         view.cam.R, view.cam.T);
+    if (cam.select(1, 2).min().item<double>() > 0.1) {
+      auto px = geometry::distort_pixels(geometry::project(cam, view.cam.K), view.cam.K, view.cam.D);
+      const int bx0 = std::max(0, int(std::floor(px.select(1, 0).min().item<double>())));
+      const int by0 = std::max(0, int(std::floor(px.select(1, 1).min().item<double>())));
+      const int bx1 = std::min(width, int(std::ceil(px.select(1, 0).max().item<double>())) + 1);
+      const int by1 = std::min(height, int(std::ceil(px.select(1, 1).max().item<double>())) + 1);
+      shadow_box = bx0 < bx1 && by0 < by1 ? cv::Rect(bx0, by0, bx1 - bx0, by1 - by0) : cv::Rect();
+    }
+  }
+  for (int y = shadow_box.y; y < shadow_box.y + shadow_box.height; ++y) {
     const float* fxy = view.floor_xy.ptr<float>(y);
     uint8_t* out = r.bgr.ptr<uint8_t>(y);
-    for (int x = 0; x < width; ++x) {
+    for (int x = shadow_box.x; x < shadow_box.x + shadow_box.width; ++x) {
       if (std::isnan(fxy[2 * x])) continue;
       const double dx = fxy[2 * x] - ground_x, dy = fxy[2 * x + 1] - ground_y;
       const double d2 = dx * dx + dy * dy;
@@ -128,16 +147,16 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
   options.cull = mesh.cull;
   const render::Raster raster = render::rasterize(verts_cam, mesh.faces, K, cw * s, ch * s, options);
 
-  auto verts = posed.verts.contiguous();
-  auto normals = posed.normals.contiguous();
+  auto verts = posed.verts.to(torch::kFloat32).contiguous();
+  auto normals = posed.normals.to(torch::kFloat32).contiguous();
   auto tex = mesh.tex.contiguous();
   auto faces = mesh.faces.contiguous();
-  auto centre = geometry::camera_center(view.cam.R, view.cam.T).contiguous();
-  const double* vp = verts.data_ptr<double>();
-  const double* np = normals.data_ptr<double>();
+  auto centre = geometry::camera_center(view.cam.R, view.cam.T).to(torch::kFloat32).contiguous();
+  const float* vp = verts.data_ptr<float>();
+  const float* np = normals.data_ptr<float>();
   const float* tp = tex.data_ptr<float>();
   const int64_t* fp = faces.data_ptr<int64_t>();
-  const double* cp = centre.data_ptr<double>();
+  const float* cp = centre.data_ptr<float>();
   const int32_t* ids = raster.face_id.data_ptr<int32_t>();
   const float* bary = raster.bary.data_ptr<float>();
   const float inv = 1.0f / float(s * s);
@@ -154,8 +173,7 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
     int material, count;
     uint8_t label;
     float depth;
-    float t[3];
-    double n[3], p[3];
+    float t[3], n[3], p[3];
   };
   std::vector<Group> groups;
   for (int py = 0; py < ch; ++py)
@@ -190,9 +208,9 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
       for (size_t gi = 0; gi < groups.size(); ++gi) {
         Group& g = groups[gi];
         if (g.count > groups[best].count) best = int(gi);
-        for (int c = 0; c < 3; ++c) g.t[c] /= float(g.count), g.p[c] /= g.count;
-        const double len = std::sqrt(g.n[0] * g.n[0] + g.n[1] * g.n[1] + g.n[2] * g.n[2]) + 1e-12;
-        double facing = 0.0;
+        for (int c = 0; c < 3; ++c) g.t[c] /= float(g.count), g.p[c] /= float(g.count);
+        const float len = std::sqrt(g.n[0] * g.n[0] + g.n[1] * g.n[1] + g.n[2] * g.n[2]) + 1e-12f;
+        float facing = 0.0f;
         for (int c = 0; c < 3; ++c) {
           g.n[c] /= len;
           facing += g.n[c] * (cp[c] - g.p[c]);
@@ -201,7 +219,7 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
         // darker (it gets little light).
         float inside = 1.0f;
         if (facing < 0) {
-          for (double& v : g.n) v = -v;
+          for (float& v : g.n) v = -v;
           inside = 0.55f;
         }
         double light = kAmbient;

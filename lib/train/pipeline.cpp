@@ -2,6 +2,9 @@
 
 #include <torch/torch.h>
 
+#include <chrono>
+
+#include "metrics/metrics.hpp"
 #include "render/progressive.hpp"
 
 namespace th::train {
@@ -55,6 +58,30 @@ Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
     out.result = renderer.render(field, rays, /*stratified=*/false);
   }
   return out;
+}
+
+ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
+                         const data::Sample& sample, const model::FrameInputs& inputs,
+                         metrics::LpipsImpl* lpips, const torch::Device& device) {
+  torch::NoGradGuard no_grad;
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto rendered = render_sample(model, rc, inputs, sample_rays(sample, device), false, false);
+  ViewResult r;
+  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  r.stats = rendered.result.stats;
+  const auto rgb = rendered.result.rgb.to(torch::kCPU, torch::kFloat32);
+  r.acc_max = rendered.result.acc.numel() ? rendered.result.acc.max().item<double>() : 0.0;
+  r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (SPEC 6)
+  const int64_t H = sample.target_image.size(0), W = sample.target_image.size(1);
+  r.pred = scatter_image(rgb, sample.ray_pixel, H, W);
+  r.gt = sample.target_image * sample.box_mask.unsqueeze(-1);
+  const auto crop = metrics::crop_to_valid(r.pred, r.gt, sample.box_mask);
+  r.ssim = metrics::ssim(crop.pred.to(torch::kFloat64), crop.gt.to(torch::kFloat64));
+  if (lpips) {
+    auto nchw = [&](const torch::Tensor& t) { return t.permute({2, 0, 1}).unsqueeze(0).to(device) * 2 - 1; };
+    r.lpips = lpips->forward(nchw(crop.pred), nchw(crop.gt)).item<double>();
+  }
+  return r;
 }
 
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,

@@ -5,10 +5,12 @@
 
 #include <torch/types.h>
 
+#include <limits>
 #include <memory>
 
 #include "body/grouping.hpp"
 #include "data/dataset.hpp"
+#include "metrics/lpips.hpp"
 #include "model/inputs.hpp"
 #include "model/transhuman.hpp"
 #include "render/volume.hpp"
@@ -43,6 +45,19 @@ struct Rendered {
 Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& render_config,
                        const model::FrameInputs& inputs, const render::Rays& rays, bool training,
                        bool cull_in_training, render::Profile* profile = nullptr);
+
+// A test view rendered and scored with the protocol of SPEC 6: PSNR over the valid rays, SSIM
+// and LPIPS (when `lpips` is given; NaN otherwise) on the crop to the valid-ray rectangle.
+struct ViewResult {
+  double psnr = 0, ssim = 0, lpips = std::numeric_limits<double>::quiet_NaN();
+  double acc_max = 0;       // largest accumulated opacity (near 0 everywhere: a collapsed model)
+  double seconds = 0;       // render time
+  torch::Tensor pred, gt;   // (H, W, 3) float32 CPU, black outside the valid rays
+  render::RenderStats stats;
+};
+ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& render_config,
+                         const data::Sample& sample, const model::FrameInputs& inputs,
+                         metrics::LpipsImpl* lpips, const torch::Device& device);
 
 // Scatters per-ray colours into an image (H, W, 3), black elsewhere.
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,

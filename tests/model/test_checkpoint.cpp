@@ -107,6 +107,24 @@ TEST_CASE("the full checkpoint's other entries are readable", "[model][checkpoin
   CHECK(all.at("recorder.step").item<int64_t>() == 1234);
 }
 
+TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[model][checkpoint]") {
+  const auto& dir = fixtures();
+  REQUIRE(test::run_python("scripts/export_pretrained.py",
+                           "--weights " + (dir / "resnet18.pth").string() + " --out " + (dir / "resnet18.npz").string()) == 0);
+  auto cfg = test::tiny_model_config();
+  cfg.encoder.pretrained = (dir / "resnet18.npz").string();
+  TransHuman model(cfg);  // loads in the constructor
+  const auto expected = expected_tensors(dir);
+  for (const auto& p : model->encoder->model->named_parameters()) {
+    INFO(p.key());
+    CHECK(torch::equal(p.value(), expected.at("encoder.model." + p.key())));
+  }
+  for (const auto& b : model->encoder->model->named_buffers()) {
+    INFO(b.key());
+    CHECK(torch::equal(b.value(), expected.at("encoder.model." + b.key()).to(b.value().dtype())));
+  }
+}
+
 TEST_CASE("pretrained ResNet-18 weights load from an npz; own weights round-trip", "[model][checkpoint]") {
   const auto dir = test::scratch_dir("checkpoint_own");
   TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());

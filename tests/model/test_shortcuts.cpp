@@ -135,3 +135,43 @@ TEST_CASE("the model with SPEC 9 shortcuts equals the direct computation", "[mod
     }
   }
 }
+
+TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradients", "[model][shortcuts]") {
+  torch::manual_seed(7);
+  const int64_t n = 50, V = 3;
+  auto q = torch::randn({n, V, 384}, torch::kDouble).requires_grad_(true);
+  auto kv = torch::randn({n, V, 384}, torch::kDouble).requires_grad_(true);
+  auto run = [&](bool fused) {
+    const auto qq = q.narrow(2, 0, 128), k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256),
+               r = q.narrow(2, 128, 256);
+    return fused ? FDIImpl::attend(qq, k, u, r) : torch::baddbmm(r, FDIImpl::attention(qq, k), u);
+  };
+  const auto g = torch::randn({n, V, 256}, torch::kDouble);
+  const auto a = run(true), b = run(false);
+  CHECK(max_abs(a, b) < 1e-12);
+  const auto ga = torch::autograd::grad({a}, {q, kv}, {g});
+  const auto gb = torch::autograd::grad({b}, {q, kv}, {g});
+  CHECK(max_abs(ga[0], gb[0]) < 1e-12);
+  CHECK(max_abs(ga[1], gb[1]) < 1e-12);
+}
+
+TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][shortcuts]") {
+  torch::manual_seed(8);
+  const int64_t nt = 60, n = 500;
+  TokenFrames frames{torch::randn({nt, 3}) * 0.3, torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
+  const auto xs = torch::randn({n, 3}) * 0.4;
+  for (const char* coordinate : {"relative", "absolute", "none"}) {
+    for (int nk : {1, 4, 7}) {
+      DPaRFConfig cfg;
+      cfg.coordinate = coordinate;
+      cfg.nk = nk;
+      DPaRF dparf(cfg);
+      const auto a = dparf.query(frames, xs), b = dparf.query_tensors(frames, xs);
+      INFO(coordinate << " nk " << nk);
+      CHECK(torch::equal(a.index, b.index));
+      CHECK(max_abs(a.weight, b.weight) < 1e-6);
+      CHECK(a.coords.defined() == b.coords.defined());
+      if (a.coords.defined()) CHECK(max_abs(a.coords, b.coords) < 1e-5);
+    }
+  }
+}

@@ -3,8 +3,8 @@ values, using Debian's python3-torch; and the expected tensors as raw arrays for
 
 Usage: model_checkpoint.py <dir>
 Writes <dir>/full.pth ({'net', 'optim', 'scheduler', 'recorder', 'epoch'}), <dir>/bare.pth (the
-state dict itself, an OrderedDict), <dir>/wrong_shape.pth, <dir>/missing.pth, and the 'net'
-tensors as <dir>/<name>.bin + manifest.txt (float32/int64).
+state dict itself, an OrderedDict), <dir>/wrong_shape.pth, <dir>/missing.pth, <dir>/resnet18.pth
+(the ResNet part under torchvision's names), and the 'net' tensors as <dir>/<name>.bin + manifest.txt (float32/int64).
 """
 import collections
 import os
@@ -79,6 +79,9 @@ def main(out):
             "epoch": 2100}
     torch.save(full, os.path.join(out, "full.pth"))
     torch.save(sd, os.path.join(out, "bare.pth"))
+    # torchvision's layout for scripts/export_pretrained.py: the same ResNet values, unprefixed.
+    torch.save({k[len("encoder.model."):]: v for k, v in sd.items() if k.startswith("encoder.model.")},
+               os.path.join(out, "resnet18.pth"))
     wrong = collections.OrderedDict(sd)
     wrong["fc_3.weight"] = torch.randn(256, 255, 1)
     torch.save({"net": wrong}, os.path.join(out, "wrong_shape.pth"))

@@ -4,6 +4,7 @@
 
 #include <catch2/catch.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <torch/torch.h>
 
 #include <chrono>
@@ -22,6 +23,7 @@
 #include "synth/layout.hpp"
 #include "synth/png.hpp"
 #include "synth/random.hpp"
+#include "synth/rig.hpp"
 #include "synth/split.hpp"
 
 namespace fs = std::filesystem;
@@ -213,10 +215,17 @@ TEST_CASE("tiny dataset (noise off): numpy finds SPEC 1.1's structure, vertices 
   CHECK(s.people == 3);
   CHECK(s.images == 4 * (21 + 23 + 23));
   CHECK(seconds < 30.0);  // "in seconds": about 3 s on an idle 2-core machine
+  // Structure at the tiny size; mask geometry at 256 x 256, where limbs are several pixels
+  // wide (at 128 x 128 an arm is 4 px and its rim vertices are half of it).
+  CHECK(th::test::run_python("tests/python/check_synth.py",
+                             (dir / "data").string() + " --ring 3.0 0.08") == 0);
+  generate(tiny({"noise.enabled=false", "image.width=256", "image.height=256", "frames=2",
+                 "split.train_frames=1"}),
+           dir / "data256", false);
   CHECK(fs::exists(dir / "data" / "contact_sheet.png"));
   CHECK(fs::exists(dir / "data" / "split.yaml"));
   CHECK(th::test::run_python("tests/python/check_synth.py",
-                             (dir / "data").string() + " --noise-free --ring 3.0 0.08") == 0);
+                             (dir / "data256").string() + " --noise-free --ring 3.0 0.08") == 0);
 }
 
 TEST_CASE("annots and params read back in C++ equal to numpy's reading", "[synth][python]") {

@@ -1,0 +1,130 @@
+#include "eval/evaluator.hpp"
+
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <fstream>
+#include <numeric>
+
+#include "body/smpl.hpp"
+#include "core/error.hpp"
+#include "core/progress.hpp"
+#include "data/dataset.hpp"
+#include "metrics/lpips.hpp"
+#include "train/images.hpp"
+#include "train/jsonl.hpp"
+#include "train/pipeline.hpp"
+#include "train/trainer.hpp"
+#include "video/frame_writer.hpp"
+
+namespace th::eval {
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string fmt(double v, int digits) {
+  if (!std::isfinite(v)) return "n/a";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
+  return buf;
+}
+
+void write_outputs(const EvalSummary& s, const fs::path& dir) {
+  {
+    std::ofstream csv(dir / "per_image.csv");
+    csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n";
+    for (const auto& r : s.per_image)
+      csv << r.human << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
+          << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ','
+          << r.points << ',' << r.culled_points << '\n';
+  }
+  {
+    train::JsonLine j;
+    j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
+        .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
+        .add("seconds_per_image", s.seconds_per_image);
+    std::ofstream(dir / "summary.json") << j.str() << '\n';
+  }
+  std::ofstream(dir / "results.md") << markdown_table({s});
+}
+
+}  // namespace
+
+std::string markdown_table(const std::vector<EvalSummary>& summaries) {
+  std::string out = "| setting | images | PSNR | SSIM | LPIPS |\n|---|---|---|---|---|\n";
+  for (const auto& s : summaries)
+    out += "| " + s.setting + " | " + std::to_string(s.images) + " | " + fmt(s.psnr, 2) + " | " +
+           fmt(s.ssim, 3) + " | " + (s.lpips_available ? fmt(s.lpips, 3) : "n/a (no weights)") + " |\n";
+  return out;
+}
+
+EvalSummary evaluate(const Config& config, const torch::Device& device, const fs::path& checkpoint,
+                     const fs::path& out_dir) {
+  const std::string setting = config.eval.setting;
+  const auto smpl = data::load_body_model(config.data);
+  auto dataset = std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
+  model::TransHuman model(config.model, config.render.cull_distance);
+  train::load_weights(*model, checkpoint);
+  model->to(device);
+  model->eval();
+  auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
+  const torch::Tensor canonical = smpl->v_template.to(torch::kFloat32);
+  train::Tokens tokens(config.model.grouping, smpl->v_template);
+
+  size_t n = dataset->size();
+  if (config.eval.limit > 0) n = std::min(n, size_t(config.eval.limit));
+  std::vector<size_t> order(n);
+  std::iota(order.begin(), order.end(), 0);
+  data::Prefetcher loader(dataset, order, std::vector<uint64_t>(n, 0), config.data.workers, config.data.prefetch);
+  const fs::path image_dir = out_dir / "images";
+  if (config.eval.save_images) fs::create_directories(image_dir);
+
+  EvalSummary summary;
+  summary.setting = setting;
+  summary.lpips_available = lpips != nullptr;
+  Progress progress("eval " + setting, int64_t(n), "img");
+  for (size_t i = 0; i < n; ++i) {
+    const data::Sample s = loader.next();
+    const auto inputs = train::frame_inputs(s, canonical, tokens.labels(s.body), device);
+    const auto r = train::evaluate_view(*model, config.render, s, inputs, lpips.get(), device);
+    summary.per_image.push_back({s.human, s.frame, s.target_view, r.psnr, r.ssim, r.lpips, r.seconds,
+                                 r.stats.points, r.stats.culled_points});
+    if (config.eval.save_images) {
+      std::vector<cv::Mat> imgs{video::to_bgr8(r.pred), video::to_bgr8(r.gt)};
+      std::vector<std::string> captions{"prediction " + fmt(r.psnr, 2) + " dB", "ground truth"};
+      for (int64_t v = 0; v < s.ref_images.size(0); ++v) {
+        imgs.push_back(video::to_bgr8(s.ref_images[v].permute({1, 2, 0})));
+        captions.push_back("input view " + std::to_string(s.reference_views[size_t(v)]));
+      }
+      imgs.push_back(train::error_map(r.pred, r.gt));
+      captions.push_back("|error|");
+      char name[128];
+      std::snprintf(name, sizeof name, "%s_f%04d_v%02d.png", s.human.c_str(), s.frame, s.target_view);
+      video::write_png(image_dir / name, train::panel(imgs, captions));
+    }
+    char note[64];
+    std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", r.psnr, r.ssim);
+    progress.advance(1, note);
+  }
+  progress.finish();
+
+  summary.images = int(summary.per_image.size());
+  if (summary.images == 0) fail("setting '", setting, "' has no images to evaluate");
+  auto mean = [&](auto field) {
+    double sum = 0;
+    for (const auto& r : summary.per_image) sum += field(r);
+    return sum / summary.images;
+  };
+  summary.psnr = mean([](const ImageScore& r) { return r.psnr; });
+  summary.ssim = mean([](const ImageScore& r) { return r.ssim; });
+  summary.lpips = lpips ? mean([](const ImageScore& r) { return r.lpips; }) : NAN;
+  summary.seconds_per_image = mean([](const ImageScore& r) { return r.seconds; });
+  write_outputs(summary, out_dir);
+  spdlog::info("{}: {} images | PSNR {:.2f} | SSIM {:.4f} | LPIPS {} | {:.1f} s/image", setting,
+               summary.images, summary.psnr, summary.ssim,
+               lpips ? fmt(summary.lpips, 4) : "n/a (no weights)", summary.seconds_per_image);
+  return summary;
+}
+
+}  // namespace th::eval

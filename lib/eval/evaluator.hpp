@@ -1,0 +1,41 @@
+#pragma once
+// transhuman-eval's protocol (SPEC 6): every target view of a test setting rendered with fixed
+// references, progressive rendering, PSNR / SSIM / LPIPS per image; per-image CSV, summary JSON,
+// a markdown table, and for each image a panel (prediction, ground truth, inputs, error map).
+
+#include <torch/types.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+
+namespace th::eval {
+
+struct ImageScore {
+  std::string human;
+  int frame = 0, view = 0;
+  double psnr = 0, ssim = 0, lpips = 0;  // lpips NaN when unavailable
+  double seconds = 0;
+  int64_t culled_points = 0, points = 0;
+};
+
+struct EvalSummary {
+  std::string setting;
+  int images = 0;
+  double psnr = 0, ssim = 0, lpips = 0;  // means; lpips NaN when unavailable
+  bool lpips_available = false;
+  double seconds_per_image = 0;
+  std::vector<ImageScore> per_image;
+};
+
+// Evaluates `checkpoint` (ours or a reference .pth) on config.eval.setting, writing results to
+// `out_dir`. config.eval.limit > 0 evaluates only the first images.
+EvalSummary evaluate(const Config& config, const torch::Device& device,
+                     const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir);
+
+// "| setting | images | PSNR | SSIM | LPIPS |" rows for a set of summaries.
+std::string markdown_table(const std::vector<EvalSummary>& summaries);
+
+}  // namespace th::eval
