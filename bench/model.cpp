@@ -209,6 +209,9 @@ int main(int argc, char** argv) {
   cli.add_option("--out", out, "write the figures to this file (markdown)");
   cli.add_option("--chunks", chunks, "chunk sizes for the per-point figures");
   cli.add_flag("--quick", quick, "small image and fewer repetitions (smoke run)");
+  int64_t train_chunk = RenderConfig{}.train_chunk_points, render_chunk = RenderConfig{}.chunk_points;
+  cli.add_option("--train-chunk", train_chunk, "render.train_chunk_points for the training step");
+  cli.add_option("--render-chunk", render_chunk, "render.chunk_points for the image");
   std::vector<std::string> sections{"points", "train", "render"};
   cli.add_option("--sections", sections, "which parts to run: points train render");
   bool system_malloc = false;
@@ -229,6 +232,8 @@ int main(int argc, char** argv) {
   r.line("LibTorch " + std::string(TORCH_VERSION) + ", " + std::to_string(nthreads) + " threads, BLAS " +
          runtime::detect_blas().name + "; synthetic frame: 3 reference views " + std::to_string(size) + "x" +
          std::to_string(size) + ", 6890 body vertices, 300 tokens, default model (ViT depth 12), random weights.");
+  const char* wait = std::getenv("OMP_WAIT_POLICY");
+  r.line(std::string("OMP_WAIT_POLICY=") + (wait ? wait : "(unset: libgomp default, active spinning)") + ".");
   r.line(std::string("Allocator: glibc malloc") + (system_malloc ? " (defaults)" : " with M_MMAP_MAX=0, no trimming") + ".");
   r.line("Memory: peak RSS delta of the measured section (VmHWM after reset via /proc/self/clear_refs, minus VmRSS before).");
   r.line("");
@@ -236,6 +241,8 @@ int main(int argc, char** argv) {
   const auto scene = make_scene(size, 6890, 300);
   ModelConfig mc;
   RenderConfig rc;
+  rc.train_chunk_points = train_chunk;
+  rc.chunk_points = render_chunk;
   torch::manual_seed(1);
   model::TransHuman net(mc, rc.cull_distance);
   {
@@ -261,7 +268,7 @@ int main(int argc, char** argv) {
   if (wanted("points")) {
   r.line("## Per-point network (DPaRF + FDI + heads, 3 views), points within 0.1 m of the body");
   r.line("");
-  r.line("| chunk | forward pts/s | density-first pts/s | fwd+bwd pts/s (graph kept) | training path pts/s (no-grad fwd + recompute + bwd) | peak MiB fwd+bwd |");
+  r.line("| chunk | forward pts/s | density-first pts/s | fwd+bwd pts/s (one chunk, graph kept) | training pts/s (no-grad fwd + recompute + bwd, 65536 points per call) | peak MiB training |");
   r.line("|---|---|---|---|---|---|");
   {
     net->train();
@@ -275,6 +282,15 @@ int main(int argc, char** argv) {
     const auto pts = body_points(scene, *cache_ng.body, total, &dirs);
     const double min_time = quick ? 0.3 : 2.0;
     std::vector<std::string> stage_lines;
+    // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded),
+    // with gradient sinks for the gathered tables as the training path uses them.
+    model::FrameCache cache_g = cache_ng;
+    for (auto& [k, v] : cache_g.tensors)
+      if (v.is_floating_point() && k.rfind("cam.", 0) != 0 && k.rfind("body.", 0) != 0 && k != "app.image_table" &&
+          k != "human.origins" && k != "human.rotations") {
+        v = v.detach().requires_grad_(true);
+        if (model::FrameCache::gathered(k)) cache_g.grad_sinks[k] = torch::zeros_like(v);
+      }
     for (const int64_t chunk : chunks) {
       if (chunk > pts.size(0)) continue;
       auto rate = [&](auto&& fn) {
@@ -301,26 +317,29 @@ int main(int argc, char** argv) {
         shares_into(stage_lines.back(), fwd_profile, fwd_seconds);
         dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward_density_first(cache_ng, p, d); });
       }
-      // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded).
-      model::FrameCache cache_g = cache_ng;
-      for (auto& [k, v] : cache_g.tensors)
-        if (v.is_floating_point() && k.rfind("cam.", 0) != 0 && k.rfind("body.", 0) != 0 && k != "app.image_table" &&
-            k != "human.origins" && k != "human.rotations")
-          v = v.detach().requires_grad_(true);
-      PeakMemory mem;
       fb = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
         const auto raw = net->forward(cache_g, p, d);
         raw.backward(torch::ones_like(raw));
       });
-      const double fb_mem = mem.mib();
-      model::FrameField field(*net, cache_g, chunk, true);
-      train = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
-        const auto raw = field.raw(p, d);
+      // The training path: one field call for all points, chunked and recomputed inside.
+      model::FrameCache cache_t = cache_g;
+      cache_t.grad_sinks.clear();
+      for (auto& [k, v] : cache_t.tensors)
+        if (v.requires_grad()) v = v.detach().requires_grad_(true);
+      model::FrameField field(*net, cache_t, chunk, true);
+      PeakMemory mem;
+      int reps = 0;
+      const auto t0 = Clock::now();
+      do {
+        const auto raw = field.raw(pts, dirs);
         raw.backward(torch::ones_like(raw));
-      });
+        ++reps;
+      } while (seconds_since(t0) < min_time);
+      train = reps * pts.size(0) / seconds_since(t0);
+      const double train_mem = mem.mib();
       net->zero_grad();
       r.line("| " + std::to_string(chunk) + " | " + fmt(fwd, 0) + " | " + fmt(dfirst, 0) + " | " + fmt(fb, 0) + " | " +
-             fmt(train, 0) + " | " + fmt(fb_mem, 0) + " |");
+             fmt(train, 0) + " | " + fmt(train_mem, 0) + " |");
     }
     r.line("");
     r.line("");
@@ -341,13 +360,14 @@ int main(int argc, char** argv) {
       net->train();
       torch::manual_seed(2);
       const auto rays = patch_rays(scene);
+      std::vector<torch::Tensor> snapshot;
+      for (const auto& p : net->parameters()) snapshot.push_back(p.detach().clone());
       torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(7e-4));
       auto step = [&](render::Profile* prof) {
         net->set_profile(prof);
         render::ScopedTimer t(prof, "total");
         const auto cache = net->prepare(scene.in);
-        model::FrameField field(*net, cache, rcs.chunk_points, true);
-        const auto img = render::VolumeRenderer(rcs, prof).render(field, rays, true);
+        const auto img = model::render_training_rays(*net, cache, rays, rcs, false, prof);
         const auto loss = (img.rgb - 0.5).pow(2).mean();
         adam.zero_grad();
         {
@@ -365,9 +385,14 @@ int main(int argc, char** argv) {
       for (int i = 0; i < reps; ++i) step(&prof);
       const double sec = seconds_since(t0) / reps;
       for (auto& [k, v] : prof.seconds) v /= reps;
+      {
+        torch::NoGradGuard ng;
+        const auto params = net->parameters();
+        for (size_t i = 0; i < params.size(); ++i) params[i].copy_(snapshot[i]);
+      }
       r.line("Training step (" + std::to_string(rays.size()) + " rays x " + std::to_string(samples) +
              " samples = " + std::to_string(rays.size() * samples) + " points, chunk " +
-             std::to_string(rcs.chunk_points) + ", checkpointed): " + fmt(sec, 2) + " s, peak memory " +
+             std::to_string(rcs.train_chunk_points) + ", checkpointed): " + fmt(sec, 2) + " s, peak memory " +
              fmt(mem.mib(), 0) + " MiB, " + fmt(rays.size() * samples / sec, 0) + " points/s end to end");
       prof.seconds.erase("total");
       shares(r, prof, sec);
@@ -384,8 +409,7 @@ int main(int argc, char** argv) {
         torch::NoGradGuard ng;
         net->set_profile(&prof);
         const auto cache = net->prepare(scene.in);
-        model::FrameField field(*net, cache, rcs.chunk_points, false);
-        img = render::render_progressive(field, *cache.body, rays, rcs, &prof);
+        img = model::render_rays(*net, cache, rays, rcs, &prof);
         net->set_profile(nullptr);
       }
       const double sec = seconds_since(t0);

@@ -109,6 +109,8 @@ struct RenderConfig {
   bool progressive = true;       // inference: distance culling, colour only where sigma > 0
   double cull_distance = 0.1;    // metres from the nearest body vertex
   int64_t chunk_points = 65536;  // per-point work is batched in chunks of this many points
+  // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
+  int64_t train_chunk_points = 8192;
 };
 
 // ---- training (SPEC 5) -------------------------------------------------------------------
@@ -234,6 +236,7 @@ template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("progressive", c.progressive);
   v("cull_distance", c.cull_distance);
   v("chunk_points", c.chunk_points);
+  v("train_chunk_points", c.train_chunk_points);
 }
 template <class V> void visit_fields(V& v, TrainConfig& c) {
   v("epochs", c.epochs);

@@ -304,6 +304,23 @@ torch::Tensor FrameField::raw_density_first(const torch::Tensor& pts, const torc
   return forward_chunks(model_, cache_, pts, dirs, chunk_, true);
 }
 
+render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCache& cache,
+                                          const render::Rays& rays, const RenderConfig& config,
+                                          bool skip_far_points, render::Profile* profile) {
+  FrameField field(model, cache, config.train_chunk_points, true);
+  auto all = config;  // one renderer batch: the field chunks (and checkpoints) internally
+  all.chunk_points = std::max<int64_t>(config.chunk_points, rays.size() * config.samples);
+  return render::VolumeRenderer(all, profile).render(field, rays, true, skip_far_points ? cache.body.get() : nullptr);
+}
+
+render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
+                                 const RenderConfig& config, render::Profile* profile) {
+  torch::NoGradGuard no_grad;
+  FrameField field(model, cache, config.chunk_points, false);
+  if (config.progressive) return render::render_progressive(field, *cache.body, rays, config, profile);
+  return render::VolumeRenderer(config, profile).render(field, rays, false);
+}
+
 std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model) {
   std::vector<ParameterCount> out{{"encoder (ResNet-18 to layer2)", 0}, {"reduction + colour", 0}};
   const bool spc = model.config().representation == "spc_trilinear";

@@ -16,6 +16,7 @@
 #include "model/heads.hpp"
 #include "model/human.hpp"
 #include "model/inputs.hpp"
+#include "render/progressive.hpp"
 #include "render/volume.hpp"
 
 namespace th::model {
@@ -76,6 +77,19 @@ class FrameField : public render::RadianceField {
   int64_t chunk_;
   bool checkpoint_;
 };
+
+// Rendering one prepared frame the way training and inference do it.
+// Training: stratified samples; every sample evaluated (or, with skip_far_points, those within
+// render.cull_distance of the body) in chunks of render.train_chunk_points, recomputed in the
+// backward pass; one field call for all rays so per-frame gradient buffers are made once.
+// rays: (R) rays of the target view -> rgb (R, 3) etc. with autograd history.
+render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCache& cache,
+                                          const render::Rays& rays, const RenderConfig& config,
+                                          bool skip_far_points = false, render::Profile* profile = nullptr);
+// Inference: no stratification; progressive rendering (render.progressive) or every sample;
+// chunks of render.chunk_points; no autograd.
+render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
+                                 const RenderConfig& config, render::Profile* profile = nullptr);
 
 // Active parameters per module (SPEC 3.4): encoder (ResNet-18 to layer2), reduction + colour,
 // ViT (or the SPC network), heads (fc_0, FDI and heads), and "total" last.

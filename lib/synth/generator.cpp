@@ -6,6 +6,8 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <dlfcn.h>
+
 #include <atomic>
 #include <chrono>
 #include <fstream>
@@ -67,14 +69,27 @@ class LibraryThreads {
   explicit LibraryThreads(int n) : torch_(torch::get_num_threads()), cv_(cv::getNumThreads()) {
     torch::set_num_threads(n);
     cv::setNumThreads(n);
+    // OpenBLAS (found at run time, as lib/core/runtime does) keeps its own threads, which
+    // spin between the small matrix products of LBS and would take a third of the CPU.
+    using Get = int (*)();
+    using Set = void (*)(int);
+    get_blas_ = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+    set_blas_ = reinterpret_cast<Set>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+    if (get_blas_ && set_blas_) {
+      blas_ = get_blas_();
+      set_blas_(n);
+    }
   }
   ~LibraryThreads() {
     torch::set_num_threads(torch_);
     cv::setNumThreads(cv_);
+    if (get_blas_ && set_blas_) set_blas_(blas_);
   }
 
  private:
-  int torch_, cv_;
+  int torch_, cv_, blas_ = 0;
+  int (*get_blas_)() = nullptr;
+  void (*set_blas_)(int) = nullptr;
 };
 
 void write_bytes(const fs::path& path, const std::vector<uchar>& bytes) {

@@ -19,6 +19,7 @@
 #include "train/images.hpp"
 #include "train/jsonl.hpp"
 #include "train/pipeline.hpp"
+#include "train/plot.hpp"
 #include "train/schedule.hpp"
 #include "train/validation.hpp"
 
@@ -240,6 +241,7 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
       if (tc.max_minutes > 0 && minutes() >= tc.max_minutes) {
         spdlog::info("time budget of {} minutes reached at step {}", tc.max_minutes, st.step);
         checkpoint(st, false);
+        plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
         summary.steps = st.step;
         summary.epoch = epoch;
         summary.checkpoint = last_ckpt;
@@ -252,12 +254,16 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
       const bool last = st.epoch == tc.epochs;
       if (st.epoch % tc.save_every_epochs == 0 || last) checkpoint(st, true);
       if (val_set && (st.epoch % tc.val_every_epochs == 0 || last))
+      {
         summary.last_val_psnr = validate(*model, config, *val_set, tokens, canonical, device,
                                          val_dir, st.epoch, metrics_log, st.step);
+        plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
+      }
     }
   }
   progress.finish();
   checkpoint(st, false);
+  plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
   summary.steps = st.step;
   summary.epoch = st.epoch;
   summary.checkpoint = last_ckpt;

@@ -25,12 +25,14 @@ struct Ablation {
   std::function<void(ModelConfig&, RenderConfig&)> configure;
   std::function<void(model::FrameInputs&)> labels;  // optional relabelling
   int64_t vertices = 300, tokens = 24;
+  bool skip_far_points = false;
 };
 
 void train_step_and_render(const Ablation& ab) {
   auto cfg = test::tiny_model_config();
   RenderConfig rc;
   rc.chunk_points = 2048;
+  rc.train_chunk_points = 1024;
   ab.configure(cfg, rc);
   cfg.grouping.num_tokens = static_cast<int>(ab.tokens);
   validate_section(cfg, "model");
@@ -48,9 +50,8 @@ void train_step_and_render(const Ablation& ab) {
   // One training step (stratified samples, MSE).
   {
     const auto cache = model->prepare(frame.inputs);
-    FrameField field(*model, cache, rc.chunk_points);
     const auto rays = test::target_rays(frame, 10);
-    const auto out = render::VolumeRenderer(rc).render(field, rays, true);
+    const auto out = render_training_rays(*model, cache, rays, rc, ab.skip_far_points);
     const auto loss = (out.rgb - 0.5).pow(2).mean();
     adam.zero_grad();
     loss.backward();
@@ -64,9 +65,8 @@ void train_step_and_render(const Ablation& ab) {
   model->eval();
   torch::NoGradGuard ng;
   const auto cache = model->prepare(frame.inputs);
-  FrameField field(*model, cache, rc.chunk_points);
   const auto rays = test::target_rays(frame, 16);
-  const auto img = render::render_progressive(field, *cache.body, rays, rc);
+  const auto img = render_rays(*model, cache, rays, rc);
   CHECK(img.rgb.size(0) == rays.size());
   CHECK(torch::isfinite(img.rgb).all().item<bool>());
   CHECK(img.stats.density_points > 0);
@@ -97,6 +97,8 @@ TEST_CASE("every ablation builds, trains one step and renders one image", "[mode
       {"SPC + trilinear",
        [](ModelConfig& c, RenderConfig&) { c.representation = "spc_trilinear", c.spc.voxel_size = 0.05, c.spc.channels = 16; }},
       {"16 samples", [](ModelConfig&, RenderConfig& r) { r.samples = 16; }},
+      {"training skips far points, full (non-progressive) inference",
+       [](ModelConfig&, RenderConfig& r) { r.progressive = false, r.train_chunk_points = 256; }, nullptr, 300, 24, true},
       {"fused PE rounding, running BatchNorm statistics",
        [](ModelConfig& c, RenderConfig&) { c.transhe.pe_rounding = "fused", c.encoder.batchnorm = "running"; }},
       {"direct computation (no shortcuts)",
