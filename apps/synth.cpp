@@ -3,9 +3,9 @@
 //   transhuman-synth --out data/synthetic [--config configs/synth/default.yaml] [key=value ...]
 //                    [--force]
 
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include <CLI/CLI.hpp>
 #include <cstdio>
 
 #include "app/app.hpp"
@@ -34,8 +34,8 @@ int main(int argc, char** argv) {
     }
     th::logging::init_console(verbose);
 
-    const auto config =
-        th::config::from_tree<th::synth::SynthConfig>(th::config::load_tree(config_file, overrides));
+    const auto config = th::config::from_tree<th::synth::SynthConfig>(
+        th::config::load_tree(config_file, overrides));
     spdlog::info("transhuman-synth | config {} | out {} | seed {}", config_file, out, config.seed);
     const auto s = th::synth::generate(config, out, force);
     const double mb = double(s.bytes) / (1024.0 * 1024.0);

@@ -15,14 +15,13 @@ namespace th::body {
 namespace fs = std::filesystem;
 
 const std::array<const char*, kNumJoints> kJointNames = {
-    "pelvis",         "left_hip",       "right_hip",  "spine1",        "left_knee",
-    "right_knee",     "spine2",         "left_ankle", "right_ankle",   "spine3",
-    "left_foot",      "right_foot",     "neck",       "left_collar",   "right_collar",
-    "head",           "left_shoulder",  "right_shoulder", "left_elbow", "right_elbow",
-    "left_wrist",     "right_wrist",    "left_hand",  "right_hand"};
+    "pelvis",     "left_hip",    "right_hip",    "spine1",      "left_knee",     "right_knee",
+    "spine2",     "left_ankle",  "right_ankle",  "spine3",      "left_foot",     "right_foot",
+    "neck",       "left_collar", "right_collar", "head",        "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist",   "right_wrist", "left_hand",     "right_hand"};
 
-const std::array<int, kNumJoints> kParents = {-1, 0,  0,  0,  1,  2,  3,  4,  5,  6,  7,  8,
-                                              9,  9,  9,  12, 13, 14, 16, 17, 18, 19, 20, 21};
+const std::array<int, kNumJoints> kParents = {-1, 0, 0, 0,  1,  2,  3,  4,  5,  6,  7,  8,
+                                              9,  9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21};
 
 std::vector<int> SmplModel::parents() const {
   auto row = kintree_table[0].to(torch::kInt64).contiguous();
@@ -53,8 +52,7 @@ void SmplModel::validate(const std::string& source) const {
     bad("J_regressor", "must be (24, V), got " + shape_str(J_regressor));
   if (weights.dim() != 2 || weights.size(0) != V || weights.size(1) != kNumJoints)
     bad("weights", "must be (V, 24), got " + shape_str(weights));
-  if (kintree_table.dim() != 2 || kintree_table.size(0) != 2 ||
-      kintree_table.size(1) != kNumJoints)
+  if (kintree_table.dim() != 2 || kintree_table.size(0) != 2 || kintree_table.size(1) != kNumJoints)
     bad("kintree_table", "must be (2, 24), got " + shape_str(kintree_table));
   if (faces.dim() != 2 || faces.size(1) != 3) bad("f", "must be (F, 3), got " + shape_str(faces));
   if (faces.numel() > 0 && (faces.min().item<int64_t>() < 0 || faces.max().item<int64_t>() >= V))
@@ -171,7 +169,8 @@ SmplModel load_smpl(const fs::path& path) {
     return from_fields(
         [&](const char* key) {
           auto it = arrays.find(key);
-          if (it == arrays.end()) fail("SMPL model '", path.string(), "': missing field '", key, "'");
+          if (it == arrays.end())
+            fail("SMPL model '", path.string(), "': missing field '", key, "'");
           return it->second;
         },
         path.string());
@@ -228,8 +227,7 @@ LbsResult lbs(const SmplModel& m, const torch::Tensor& poses, const torch::Tenso
 
   LbsResult r;
   // SPEC 2.3: v_shaped = v_template + shapedirs . shapes; J = J_regressor . v_shaped.
-  r.v_shaped = m.v_template +
-               torch::matmul(m.shapedirs.slice(2, 0, beta.numel()), beta);
+  r.v_shaped = m.v_template + torch::matmul(m.shapedirs.slice(2, 0, beta.numel()), beta);
   r.joints = torch::matmul(m.J_regressor, r.v_shaped);
 
   auto rot = geometry::rodrigues(pose.reshape({kNumJoints, 3}));  // (24, 3, 3)
@@ -261,11 +259,11 @@ torch::Tensor skin_points(const torch::Tensor& points, const torch::Tensor& weig
                           const torch::Tensor& G) {
   TORCH_CHECK(points.dim() == 2 && points.size(1) == 3, "skin_points: points must be (P, 3), got ",
               points.sizes());
-  TORCH_CHECK(weights.dim() == 2 && weights.size(0) == points.size(0) &&
-                  weights.size(1) == G.size(0),
-              "skin_points: weights must be (P, ", G.size(0), "), got ", weights.sizes());
-  auto A = torch::matmul(weights.to(torch::kFloat64), G.reshape({G.size(0), 16}))
-               .reshape({-1, 4, 4});
+  TORCH_CHECK(
+      weights.dim() == 2 && weights.size(0) == points.size(0) && weights.size(1) == G.size(0),
+      "skin_points: weights must be (P, ", G.size(0), "), got ", weights.sizes());
+  auto A =
+      torch::matmul(weights.to(torch::kFloat64), G.reshape({G.size(0), 16})).reshape({-1, 4, 4});
   auto p = points.to(torch::kFloat64);
   return torch::matmul(A.slice(1, 0, 3).slice(2, 0, 3), p.unsqueeze(2)).squeeze(2) +
          A.slice(1, 0, 3).select(2, 3);

@@ -19,8 +19,8 @@ class Value;
 namespace th::body {
 
 constexpr int kNumJoints = 24;
-constexpr int kNumPoseParams = 3 * kNumJoints;          // 72
-constexpr int kNumPoseBlend = 9 * (kNumJoints - 1);     // 207
+constexpr int kNumPoseParams = 3 * kNumJoints;       // 72
+constexpr int kNumPoseBlend = 9 * (kNumJoints - 1);  // 207
 
 // SMPL's joint names in index order and its kinematic tree (parent of each joint; -1: root).
 extern const std::array<const char*, kNumJoints> kJointNames;

@@ -1,11 +1,11 @@
 #include "geometry/camera.hpp"
 
-#include <opencv2/calib3d.hpp>
-#include <opencv2/imgproc.hpp>
 #include <torch/torch.h>
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
 
 namespace th::geometry {
 namespace {
@@ -16,14 +16,13 @@ torch::Tensor f64(const torch::Tensor& t) { return t.to(torch::kFloat64); }
 torch::Tensor skew(const torch::Tensor& v) {
   auto x = v.select(-1, 0), y = v.select(-1, 1), z = v.select(-1, 2);
   auto o = torch::zeros_like(x);
-  return torch::stack({torch::stack({o, -z, y}, -1), torch::stack({z, o, -x}, -1),
-                       torch::stack({-y, x, o}, -1)},
-                      -2);
+  return torch::stack(
+      {torch::stack({o, -z, y}, -1), torch::stack({z, o, -x}, -1), torch::stack({-y, x, o}, -1)},
+      -2);
 }
 
 void check_points(const torch::Tensor& t, int64_t cols, const char* name) {
-  TORCH_CHECK(t.dim() == 2 && t.size(1) == cols, name, " must be (N, ", cols, "), got ",
-              t.sizes());
+  TORCH_CHECK(t.dim() == 2 && t.size(1) == cols, name, " must be (N, ", cols, "), got ", t.sizes());
 }
 
 // Distortion coefficients as five doubles (missing trailing ones are 0, as in OpenCV).
@@ -32,8 +31,7 @@ struct Coeffs {
 };
 Coeffs coeffs(const torch::Tensor& D) {
   auto d = f64(D).reshape({-1}).cpu().contiguous();
-  TORCH_CHECK(d.numel() == 4 || d.numel() == 5, "D must hold 4 or 5 coefficients, got ",
-              D.sizes());
+  TORCH_CHECK(d.numel() == 4 || d.numel() == 5, "D must hold 4 or 5 coefficients, got ", D.sizes());
   const double* p = d.data_ptr<double>();
   Coeffs c{p[0], p[1], p[2], p[3], d.numel() == 5 ? p[4] : 0.0};
   return c;

@@ -8,9 +8,9 @@
 // uv = (K x_cam)[:2] / z with pixel centres at integer coordinates. All functions take and
 // return float64 tensors (inputs of other float types are converted).
 
-#include <opencv2/core.hpp>
 #include <torch/types.h>
 
+#include <opencv2/core.hpp>
 #include <utility>
 
 namespace th::geometry {

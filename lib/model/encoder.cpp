@@ -153,11 +153,12 @@ torch::Tensor EncoderImpl::pixel_features(const EncodedViews& enc) const {
 
 torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                                  const Taps& image_taps) const {
-  // level_taps: stacked taps (9 per level); split them back per level.
+  // level_taps: stacked taps (9 per level, 4 for a level of the image's size); split them back.
   std::vector<torch::Tensor> parts;
   int64_t offset = 0, col = 0;
+  const auto& g = enc.geometry;
   for (const auto& l : enc.levels) {
-    const auto taps_per_level = level_taps.index.size(1) / static_cast<int64_t>(enc.levels.size());
+    const int64_t taps_per_level = (l.size(2) == g.height && l.size(3) == g.width) ? 4 : 9;
     Taps t{level_taps.index.narrow(1, col, taps_per_level) - offset,
            level_taps.weight.narrow(1, col, taps_per_level)};
     parts.push_back(weighted_gather(to_table(l), t));
@@ -203,14 +204,14 @@ torch::Tensor EncoderImpl::paint(const EncodedViews& enc, const torch::Tensor& u
   const auto p = sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view),
                                        enc.geometry.image_taps(flat, view));
   const auto holder = F::linear(p, reduction_layer->weight.flatten(1), reduction_layer->bias);
-  return holder.view({V, nv, -1}) * visibility.unsqueeze(-1).to(holder.dtype());
+  return holder.view({V, nv, -1}) * visibility.unsqueeze(-1).to(holder.device(), holder.scalar_type());
 }
 
 torch::Tensor EncoderImpl::paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
                                         const torch::Tensor& visibility) const {
   const auto holder = torch::conv2d(pixel_features(enc), reduction_layer->weight, reduction_layer->bias);  // (V, 192, H, W)
   const auto sampled = grid_sample_pixels(holder, uv.permute({1, 0, 2})).permute({1, 0, 2});
-  return sampled * visibility.unsqueeze(-1).to(sampled.dtype());
+  return sampled * visibility.unsqueeze(-1).to(sampled.device(), sampled.scalar_type());
 }
 
 void EncoderImpl::load_resnet_state(const std::map<std::string, torch::Tensor>& state,

@@ -33,65 +33,80 @@ void axpy(T* y, T a, const T* x, int64_t c) {
   for (int64_t i = 0; i < c; ++i) y[i] += a * x[i];
 }
 
+// Packed operands: qr = [q | r] and kv = [k | u] along the channels, (N, V, d + C), so that the
+// backward pass writes whole gradients instead of the zero-filled slices of narrow().
 struct ViewAttention : torch::autograd::Function<ViewAttention> {
-  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& q,
-                               const torch::Tensor& k, const torch::Tensor& u, const torch::Tensor& r) {
-    const int64_t N = q.size(0), V = q.size(1), D = q.size(2), C = u.size(2);
-    const double scale = 1.0 / std::sqrt(static_cast<double>(D));
-    auto out = r.contiguous().clone();
-    auto att = torch::empty({N, V, V}, q.options());
-    AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "view_attention", [&] {
-      const Rows<scalar_t> Q(q), Kr(k), U(u), O(out);
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& qr_in,
+                               const torch::Tensor& kv_in, int64_t d) {
+    const auto qr = qr_in.contiguous(), kv = kv_in.contiguous();
+    const int64_t N = qr.size(0), V = qr.size(1), W = qr.size(2), C = W - d;
+    const double scale = 1.0 / std::sqrt(static_cast<double>(d));
+    auto out = qr.narrow(2, d, C).contiguous();
+    auto att = torch::empty({N, V, V}, qr.options());
+    AT_DISPATCH_FLOATING_TYPES(qr.scalar_type(), "view_attention", [&] {
+      const scalar_t* QR = qr.data_ptr<scalar_t>();
+      const scalar_t* KV = kv.data_ptr<scalar_t>();
+      scalar_t* O = out.data_ptr<scalar_t>();
       scalar_t* A = att.data_ptr<scalar_t>();
       at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
         for (int64_t n = b; n < e; ++n) {
           scalar_t* a = A + n * V * V;
           for (int64_t v = 0; v < V; ++v) {
+            const scalar_t* q = QR + (n * V + v) * W;
             scalar_t m = -std::numeric_limits<scalar_t>::infinity(), s = 0;
-            for (int64_t j = 0; j < V; ++j) m = std::max(m, a[v * V + j] = dot(Q.at(n, v), Kr.at(n, j), D) * static_cast<scalar_t>(scale));
+            for (int64_t j = 0; j < V; ++j)
+              m = std::max(m, a[v * V + j] = dot(q, KV + (n * V + j) * W, d) * static_cast<scalar_t>(scale));
             for (int64_t j = 0; j < V; ++j) s += (a[v * V + j] = std::exp(a[v * V + j] - m));
-            for (int64_t j = 0; j < V; ++j) axpy(O.at(n, v), a[v * V + j] /= s, U.at(n, j), C);
+            for (int64_t j = 0; j < V; ++j) axpy(O + (n * V + v) * C, a[v * V + j] /= s, KV + (n * V + j) * W + d, C);
           }
         }
       });
     });
-    ctx->save_for_backward({q, k, u, att});
+    ctx->save_for_backward({qr, kv, att});
+    ctx->saved_data["d"] = d;
     return out;
   }
 
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
                                                  torch::autograd::variable_list grads) {
     const auto saved = ctx->get_saved_variables();
-    const auto &q = saved[0], &k = saved[1], &u = saved[2], &att = saved[3];
+    const auto &qr = saved[0], &kv = saved[1], &att = saved[2];
+    const int64_t d = ctx->saved_data["d"].toInt();
     const auto g = grads[0].contiguous();
-    const int64_t N = q.size(0), V = q.size(1), D = q.size(2), C = u.size(2);
-    const double scale = 1.0 / std::sqrt(static_cast<double>(D));
-    auto gq = torch::zeros({N, V, D}, q.options()), gk = torch::zeros({N, V, D}, q.options());
-    auto gu = torch::zeros({N, V, C}, u.options());
-    AT_DISPATCH_FLOATING_TYPES(q.scalar_type(), "view_attention_backward", [&] {
-      const Rows<scalar_t> Q(q), Kr(k), U(u), G(g), GQ(gq), GK(gk), GU(gu);
+    const int64_t N = qr.size(0), V = qr.size(1), W = qr.size(2), C = W - d;
+    const double scale = 1.0 / std::sqrt(static_cast<double>(d));
+    auto gqr = torch::empty_like(qr), gkv = torch::zeros_like(kv);
+    gqr.narrow(2, 0, d).zero_();
+    gqr.narrow(2, d, C).copy_(g);  // r enters the output directly
+    AT_DISPATCH_FLOATING_TYPES(qr.scalar_type(), "view_attention_backward", [&] {
+      const scalar_t* QR = qr.data_ptr<scalar_t>();
+      const scalar_t* KV = kv.data_ptr<scalar_t>();
+      const scalar_t* G = g.data_ptr<scalar_t>();
       const scalar_t* A = att.data_ptr<scalar_t>();
+      scalar_t* GQR = gqr.data_ptr<scalar_t>();
+      scalar_t* GKV = gkv.data_ptr<scalar_t>();
       at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
         std::vector<scalar_t> ga(V * V);
         for (int64_t n = b; n < e; ++n) {
           const scalar_t* a = A + n * V * V;
           for (int64_t v = 0; v < V; ++v) {
+            const scalar_t* gv = G + (n * V + v) * C;
             scalar_t inner = 0;
             for (int64_t j = 0; j < V; ++j) {
-              axpy(GU.at(n, j), a[v * V + j], G.at(n, v), C);
-              ga[v * V + j] = dot(G.at(n, v), U.at(n, j), C);
+              axpy(GKV + (n * V + j) * W + d, a[v * V + j], gv, C);  // d u_j
+              ga[v * V + j] = dot(gv, KV + (n * V + j) * W + d, C);
               inner += a[v * V + j] * ga[v * V + j];
             }
             for (int64_t j = 0; j < V; ++j) {
               const scalar_t gl = a[v * V + j] * (ga[v * V + j] - inner) * static_cast<scalar_t>(scale);
-              axpy(GQ.at(n, v), gl, Kr.at(n, j), D);
-              axpy(GK.at(n, j), gl, Q.at(n, v), D);
+              axpy(GQR + (n * V + v) * W, gl, KV + (n * V + j) * W, d);   // d q_v
+              axpy(GKV + (n * V + j) * W, gl, QR + (n * V + v) * W, d);   // d k_j
             }
           }
         }
       });
     });
-    return {gq, gk, gu, g};
+    return {gqr, gkv, torch::Tensor()};
   }
 };
 
@@ -116,11 +131,14 @@ torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k)
   return torch::softmax(torch::bmm(q, k.transpose(1, 2)) * scale, 2);
 }
 
-torch::Tensor FDIImpl::attend(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& u,
-                              const torch::Tensor& r) {
-  const bool last_contiguous = q.stride(2) == 1 && k.stride(2) == 1 && u.stride(2) == 1 && r.stride(2) == 1;
-  if (!q.device().is_cpu() || !last_contiguous) return torch::baddbmm(r, attention(q, k), u);
-  return ViewAttention::apply(q, k, u, r);
+torch::Tensor FDIImpl::attend(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d) {
+  TORCH_CHECK(qr.dim() == 3 && qr.sizes() == kv.sizes(), "attend: qr and kv must be (N, V, d + C), got ",
+              qr.sizes(), " and ", kv.sizes());
+  if (!qr.device().is_cpu()) {
+    const int64_t C = qr.size(2) - d;
+    return torch::baddbmm(qr.narrow(2, d, C), attention(qr.narrow(2, 0, d), kv.narrow(2, 0, d)), kv.narrow(2, d, C));
+  }
+  return ViewAttention::apply(qr, kv, d);
 }
 
 torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a) {
@@ -160,11 +178,11 @@ torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s
   if (config.appearance && config.human) {
     const auto kv = F::linear(a, f.w0, f.b0);  // (N, V, 128 + 256)
     const auto qr = F::linear(s, f.w1, f.b1);
-    pre = attend(qr.narrow(2, 0, 128), kv.narrow(2, 0, 128), kv.narrow(2, 128, 256), qr.narrow(2, 128, 256));
+    pre = attend(qr, kv, 128);
   } else if (config.appearance) {
     const auto kv = F::linear(a, f.w0, f.b0);
     const auto k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256);
-    pre = attend(k, k, u, u + fc_1->bias);
+    pre = torch::baddbmm(u + fc_1->bias, attention(k, k), u);
   } else {
     pre = F::linear(s, f.w1, f.b1);
   }

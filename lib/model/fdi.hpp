@@ -33,11 +33,10 @@ class FDIImpl : public torch::nn::Module {
   // softmax over the key views j of q_v . k_j / sqrt(d): q (N, V, d), k (N, V, d) -> (N, V, V)
   // indexed [n, v (query), j (key)].
   static torch::Tensor attention(const torch::Tensor& q, const torch::Tensor& k);
-  // r_v + sum_j attention(q, k)[v, j] u_j: q, k (N, V, d), u, r (N, V, C) -> (N, V, C). On CPU a
-  // fused per-point kernel with its own backward (the tiny per-point matrices make batched
-  // matrix products slow); elsewhere bmm.
-  static torch::Tensor attend(const torch::Tensor& q, const torch::Tensor& k, const torch::Tensor& u,
-                              const torch::Tensor& r);
+  // r_v + sum_j attention(q, k)[v, j] u_j with qr = [q | r], kv = [k | u] packed along the
+  // channels: (N, V, d + C) each -> (N, V, C). On CPU a fused per-point kernel with its own
+  // backward (batched products of the tiny per-point matrices are slow); elsewhere bmm.
+  static torch::Tensor attend(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d);
 
   torch::nn::Linear alpha_res_0{nullptr};       // appearance: p_v -> a_v (384 -> 256)
   torch::nn::Linear key0{nullptr}, value0{nullptr};  // appearance side (spatial_key_value_0)

@@ -13,19 +13,21 @@ TokenFieldsImpl::TokenFieldsImpl(const ModelConfig& config) : dparf(config.dparf
 
 TokenFieldsImpl::Tokens TokenFieldsImpl::tokens(const FrameInputs& in, const torch::Tensor& painted,
                                                 const torch::Tensor& xs_vertices) {
-  const int64_t nt = in.num_tokens > 0 ? in.num_tokens : in.labels.max().item<int64_t>() + 1;
+  const auto device = painted.device();
+  const auto labels = in.labels.to(device);
+  const int64_t nt = in.num_tokens > 0 ? in.num_tokens : labels.max().item<int64_t>() + 1;
   Tokens t;
   // Clusters without vertices (possible with grid groupings) have no token.
-  t.keep = cluster_counts(in.labels, nt).nonzero().flatten();
-  const auto weights = config_.grouping.mean_over == "visible" ? in.visibility : torch::Tensor();
-  auto feats = cluster_mean(painted, in.labels, nt, weights).index_select(1, t.keep);
+  t.keep = cluster_counts(labels, nt).nonzero().flatten();
+  const auto weights = config_.grouping.mean_over == "visible" ? in.visibility.to(device) : torch::Tensor();
+  auto feats = cluster_mean(painted, labels, nt, weights).index_select(1, t.keep);
   // SPEC 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
   // for the observation-space ablation, from the posed body in the SMPL frame.
   const auto& source = config_.transhe.position == "canonical" ? in.canonical : xs_vertices;
-  const auto means = cluster_mean(source.to(torch::kDouble), in.labels, nt).index_select(0, t.keep);
+  const auto means = cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);
   t.positions = normalize_token_positions(means, config_.transhe.pe_scale, painted);
   t.features = vit ? vit->forward(feats, t.positions) : feats;
-  auto frames = token_frames(xs_vertices, in.A.to(xs_vertices.dtype()), in.labels, nt);
+  auto frames = token_frames(xs_vertices, in.A.to(device, xs_vertices.scalar_type()), labels, nt);
   t.frames = {frames.origins.index_select(0, t.keep), frames.rotations.index_select(0, t.keep)};
   return t;
 }

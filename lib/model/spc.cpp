@@ -25,7 +25,7 @@ void SPCTrilinearImpl::prepare(const FrameInputs& in, const torch::Tensor& paint
   }
   const auto d = dims.cpu();
   const int64_t nx = d[0].item<int64_t>(), ny = d[1].item<int64_t>(), nz = d[2].item<int64_t>();
-  const auto cell = ((xs_vertices - lo) / voxel).round().to(torch::kLong);
+  const auto cell = ((xs_vertices.detach() - lo) / voxel).round().to(torch::kLong);
   const auto flat = (cell.select(1, 2) * ny + cell.select(1, 1)) * nx + cell.select(1, 0);
   const auto V = painted.size(0);
   const auto feats = embed(painted);  // (V, Nv, C)

@@ -234,13 +234,15 @@ torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, con
 // Forward without a graph; backward recomputes chunk by chunk with leaf copies of the frame
 // tensors, accumulates their gradients and hands them to the outer graph (the encoder, ViT and
 // the folded weights), while parameters used per point accumulate into .grad directly.
+// Colour is evaluated only where sigma_raw > 0: elsewhere the compositing weight is 0, so
+// neither the image nor any gradient changes.
 struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, torch::TensorList frame,
                                const torch::Tensor& pts, const torch::Tensor& dirs,
                                c10::intrusive_ptr<ChunkJob> job) {
     ctx->save_for_backward({pts, dirs});
     ctx->saved_data["job"] = c10::IValue::make_capsule(job);
-    return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, false);
+    return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
   }
 
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
@@ -263,7 +265,7 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     const int64_t n = pts.size(0);
     for (int64_t b = 0; b < n; b += job->chunk) {
       const int64_t e = std::min(n, b + job->chunk);
-      const auto raw = job->model->forward(cache, pts.slice(0, b, e), dirs.slice(0, b, e));
+      const auto raw = job->model->forward_density_first(cache, pts.slice(0, b, e), dirs.slice(0, b, e));
       torch::autograd::backward({raw}, {g.slice(0, b, e)});
     }
     torch::autograd::variable_list grads;

@@ -64,7 +64,10 @@ TORCH_MODULE(TransHuman);
 // The renderer's view of one prepared frame: chunks of at most `chunk_points` points. Under
 // autograd with `checkpoint`, each call stores only its inputs and recomputes its chunks in the
 // backward pass (memory bounded by one chunk); gradients reach the model parameters (.grad) and,
-// through the cached frame tensors, the encoder and the transformer.
+// through the cached frame tensors, the encoder and the transformer. The checkpointed path
+// evaluates colour only where sigma_raw > 0 (same image, same gradients: zero weight there).
+// Parameters used per point get their gradients during the backward pass through .grad, so use
+// backward() (not torch::autograd::grad) on losses built from it.
 class FrameField : public render::RadianceField {
  public:
   FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint = true);

@@ -9,14 +9,14 @@
 
 namespace th::render {
 
-Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces,
-                 const torch::Tensor& K, int width, int height, const RasterOptions& options) {
+Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces, const torch::Tensor& K,
+                 int width, int height, const RasterOptions& options) {
   TORCH_CHECK(verts_cam.dim() == 2 && verts_cam.size(1) == 3,
               "rasterize: verts_cam must be (N, 3), got ", verts_cam.sizes());
   TORCH_CHECK(faces.dim() == 2 && faces.size(1) == 3, "rasterize: faces must be (F, 3), got ",
               faces.sizes());
-  TORCH_CHECK(K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3,
-              "rasterize: K must be (3, 3), got ", K.sizes());
+  TORCH_CHECK(K.dim() == 2 && K.size(0) == 3 && K.size(1) == 3, "rasterize: K must be (3, 3), got ",
+              K.sizes());
   TORCH_CHECK(width > 0 && height > 0, "rasterize: empty image ", width, "x", height);
 
   auto v = verts_cam.to(torch::kFloat64).cpu().contiguous();

@@ -30,8 +30,8 @@ struct Raster {
 // verts_cam: (N, 3) camera coordinates (float or double); faces: (F, 3) integer vertex
 // indices; K: (3, 3) intrinsics for a width x height image. Deterministic: on equal depth the
 // lower face index wins.
-Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces,
-                 const torch::Tensor& K, int width, int height, const RasterOptions& options = {});
+Raster rasterize(const torch::Tensor& verts_cam, const torch::Tensor& faces, const torch::Tensor& K,
+                 int width, int height, const RasterOptions& options = {});
 
 // Interpolates per-vertex attributes over the raster: attrs (N, C) -> (H, W, C) float32,
 // zero where no face covers the pixel.

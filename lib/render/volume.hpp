@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <vector>
 
 #include "core/config.hpp"
 
@@ -25,19 +26,26 @@ struct Rays {
   Rays index(const torch::Tensor& rows) const;
 };
 
-// Wall time per named stage, accumulated (benchmarks; null pointer = off).
+// Wall time per named stage, accumulated (benchmarks; null pointer = off). Nested timers count
+// exclusively: a stage's time excludes the stages timed inside it.
 struct Profile {
   std::map<std::string, double> seconds;
-  void add(const std::string& stage, double s) { seconds[stage] += s; }
+  std::vector<double> open;  // time of finished children, per open timer
 };
 
 class ScopedTimer {
  public:
   ScopedTimer(Profile* profile, const char* stage)
-      : profile_(profile), stage_(stage), start_(std::chrono::steady_clock::now()) {}
+      : profile_(profile), stage_(stage), start_(std::chrono::steady_clock::now()) {
+    if (profile_) profile_->open.push_back(0.0);
+  }
   ~ScopedTimer() {
-    if (profile_)
-      profile_->add(stage_, std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count());
+    if (!profile_) return;
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const double children = profile_->open.back();
+    profile_->open.pop_back();
+    profile_->seconds[stage_] += elapsed - children;
+    if (!profile_->open.empty()) profile_->open.back() += elapsed;
   }
   ScopedTimer(const ScopedTimer&) = delete;
   ScopedTimer& operator=(const ScopedTimer&) = delete;

@@ -108,7 +108,7 @@ std::vector<Sweep> sweeps(const Dims& d) {
     Sweep s{Part::Torso, Z, X, 2.4, 32, {}};
     const double hy = d.hip_y, ay = d.arm_y, ny = d.neck_y;
     const double wz = 0.5 * d.belly;  // the belly pushes the waist forward
-    s.keys = {
+    s.keys = std::vector<Station>{
         st(0, hy - 0.075, -0.005, 0, 0),
         st(0, hy - 0.07, -0.005, 0.4 * d.hip_d, 0.35 * d.hip_w),
         st(0, hy - 0.055, -0.008, 0.75 * d.hip_d, 0.68 * d.hip_w),
@@ -116,8 +116,8 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(0, hy, -0.01, d.hip_d, d.hip_w),
         st(0, 0.0, 0.0, 0.97 * d.hip_d + 0.3 * d.belly, 0.97 * d.hip_w, 0),
         st(0, d.spine1_y, wz, d.waist_d + 0.5 * d.belly, d.waist_w, 3),
-        st(0, 0.5 * (d.spine1_y + d.spine2_y), 0.5 * wz, 0.5 * (d.waist_d + d.chest_d) + 0.3 * d.belly,
-           0.5 * (d.waist_w + d.chest_w)),
+        st(0, 0.5 * (d.spine1_y + d.spine2_y), 0.5 * wz,
+           0.5 * (d.waist_d + d.chest_d) + 0.3 * d.belly, 0.5 * (d.waist_w + d.chest_w)),
         st(0, d.spine2_y, 0.0, d.chest_d, 0.96 * d.chest_w, 6),
         st(0, d.spine3_y, 0.005, d.chest_d, d.chest_w, 9),
         st(0, 0.5 * (d.spine3_y + ay), 0.0, 0.96 * d.chest_d, 0.5 * (d.chest_w + d.shoulder_w)),
@@ -128,7 +128,7 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(0, ny + 0.005, -0.015, 0.42 * d.chest_d, 0.28 * d.shoulder_w),
         st(0, ny + 0.012, -0.015, 0, 0),
     };
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   // Left leg, top (inside the pelvis) to below the ankle; ra: x, rb: z.
   {
@@ -137,13 +137,14 @@ std::vector<Sweep> sweeps(const Dims& d) {
     const double hy = d.hip_y, ky = d.knee_y, ay = d.ankle_y, t = d.thigh_r, k = d.knee_r,
                  c = d.calf_r, a = d.ankle_r;
     auto along = [&](double f, double y0, double y1) { return y0 + f * (y1 - y0); };
-    s.keys = {
+    s.keys = std::vector<Station>{
         st(hx, hy + 0.1, 0, 0, 0),
         st(hx, hy + 0.085, 0, 0.5 * t, 0.5 * t),
         st(hx, hy + 0.05, 0, 0.85 * t, 0.85 * t),
         st(hx, hy, 0, t, 1.03 * t, 1),
         st(0.7 * hx + 0.3 * kx, along(0.3, hy, ky), 0.003, 0.9 * t, 0.93 * t),
-        st(0.3 * hx + 0.7 * kx, along(0.7, hy, ky), 0.005, 0.55 * t + 0.45 * k, 0.58 * t + 0.45 * k),
+        st(0.3 * hx + 0.7 * kx, along(0.7, hy, ky), 0.005, 0.55 * t + 0.45 * k,
+           0.58 * t + 0.45 * k),
         st(kx, ky, 0.0, k, 1.04 * k, 4),
         st(kx, along(0.2, ky, ay), -0.008, 0.5 * (k + c), 0.5 * (k + c) * 1.04),
         st(0.6 * kx + 0.4 * ax, along(0.35, ky, ay), -0.015, c, 1.08 * c),
@@ -152,13 +153,13 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(ax, ay - 0.03, d.ankle_z, 0.85 * a, 0.9 * a),
         st(ax, ay - 0.05, d.ankle_z, 0, 0),
     };
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   // Left foot, heel to toe; ra: half width (x), rb: half height (y).
   {
     Sweep s{Part::FootL, X, Y, 3.0, 12, {}};
     const double fx = d.hip_x + 0.002, so = d.sole_y, w = d.foot_w, h = d.foot_h;
-    s.keys = {
+    s.keys = std::vector<Station>{
         st(fx, so + 0.035, d.heel_z, 0, 0),
         st(fx, so + 0.035, d.heel_z + 0.008, 0.45 * w, 0.5 * h),
         st(fx, so + 0.042, d.heel_z + 0.025, 0.8 * w, 0.85 * h),
@@ -170,7 +171,7 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(fx + 0.005, so + 0.018, d.toe_z - 0.005, 0.4 * w, 0.2 * h),
         st(fx + 0.005, so + 0.018, d.toe_z, 0, 0),
     };
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   // Left arm with the hand, from inside the chest to the finger tips; ra: y, rb: z. The palm
   // faces down, as in SMPL's T-pose.
@@ -178,10 +179,10 @@ std::vector<Sweep> sweeps(const Dims& d) {
     Sweep s{Part::ArmL, Y, Z, 2.0, 16, {}};
     const double y = d.arm_y, z = d.arm_z, u = d.upper_arm_r, e = d.elbow_r, f = d.forearm_r,
                  w = d.wrist_r;
-    const double cx = d.collar_x, sx = d.shoulder_x, ex = d.elbow_x, wx = d.wrist_x,
-                 hx = d.hand_x, tx = d.tip_x;
+    const double cx = d.collar_x, sx = d.shoulder_x, ex = d.elbow_x, wx = d.wrist_x, hx = d.hand_x,
+                 tx = d.tip_x;
     auto along = [](double f0, double a, double b) { return a + f0 * (b - a); };
-    s.keys = {
+    s.keys = std::vector<Station>{
         st(cx - 0.035, y - 0.005, z, 0, 0),
         st(cx - 0.02, y - 0.005, z, 0.6 * u, 0.6 * u),
         st(cx, y - 0.005, z, 0.85 * u, 0.85 * u, 13),
@@ -199,13 +200,13 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(along(0.8, hx, tx), y, z, 0.009, 0.03),
         st(tx, y, z, 0, 0),
     };
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   // Neck, from inside the chest to inside the head; ra: z, rb: x.
   {
     Sweep s{Part::Neck, Z, X, 2.0, 12, {}};
     const double ny = d.neck_y, hy = d.head_y, r = d.neck_r;
-    s.keys = {
+    s.keys = std::vector<Station>{
         st(0, ny - 0.11, -0.01, 0, 0),
         st(0, ny - 0.1, -0.01, 0.6 * r, 0.6 * r),
         st(0, ny - 0.07, -0.01, r, r),
@@ -215,7 +216,7 @@ std::vector<Sweep> sweeps(const Dims& d) {
         st(0, hy + 0.04, 0.005, 0.8 * r, 0.8 * r),
         st(0, hy + 0.07, 0.005, 0, 0),
     };
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   // Head: an ellipsoid, slightly narrower towards the chin.
   {
@@ -229,7 +230,7 @@ std::vector<Sweep> sweeps(const Dims& d) {
       s.keys.push_back(st(0, d.head_cy - d.head_ry * std::cos(th), d.head_cz + chin,
                           pole ? 0 : d.head_rz * sn, pole ? 0 : d.head_rx * sn * narrow));
     }
-    out.push_back(s);
+    out.push_back(std::move(s));
   }
   return out;
 }
@@ -320,22 +321,33 @@ void emit_faces(const PartLayout& l, bool mirror, std::vector<int64_t>& out) {
       tri(a, b, c);
       tri(a, c, d);
     }
-  for (int j = 0; j < S; ++j) tri(l.pole1(), l.vertex(l.rings - 1, j), l.vertex(l.rings - 1, j + 1));
+  for (int j = 0; j < S; ++j)
+    tri(l.pole1(), l.vertex(l.rings - 1, j), l.vertex(l.rings - 1, j + 1));
 }
 
 // The left joint's right-side counterpart (identity for joints on the midline).
 int mirror_joint(int j) {
   switch (j) {
-    case 1: return 2;
-    case 4: return 5;
-    case 7: return 8;
-    case 10: return 11;
-    case 13: return 14;
-    case 16: return 17;
-    case 18: return 19;
-    case 20: return 21;
-    case 22: return 23;
-    default: return j;
+    case 1:
+      return 2;
+    case 4:
+      return 5;
+    case 7:
+      return 8;
+    case 10:
+      return 11;
+    case 13:
+      return 14;
+    case 16:
+      return 17;
+    case 18:
+      return 19;
+    case 20:
+      return 21;
+    case 22:
+      return 23;
+    default:
+      return j;
   }
 }
 
@@ -391,8 +403,10 @@ std::array<double, body::kNumJoints> vertex_weights(Part part, const Vec3& p, co
                      {0.04, 0.04, 0.03, 0.012});
       // The shoulder corners follow the collar bones, the hip corners the thighs a little.
       const double ax = std::abs(p[0]);
-      const double collar = 0.7 * smooth01((ax - 0.09) / 0.07) * smooth01((p[1] - (d.arm_y - 0.09)) / 0.08);
-      const double hip = 0.5 * smooth01((ax - 0.05) / 0.07) * smooth01((d.hip_y + 0.01 - p[1]) / 0.06);
+      const double collar =
+          0.7 * smooth01((ax - 0.09) / 0.07) * smooth01((p[1] - (d.arm_y - 0.09)) / 0.08);
+      const double hip =
+          0.5 * smooth01((ax - 0.05) / 0.07) * smooth01((d.hip_y + 0.01 - p[1]) / 0.06);
       for (double& v : w) v *= 1.0 - collar - hip;
       w[p[0] >= 0 ? 13 : 14] += collar;
       w[p[0] >= 0 ? 1 : 2] += hip;
@@ -420,8 +434,8 @@ std::array<double, body::kNumJoints> vertex_weights(Part part, const Vec3& p, co
 }  // namespace
 
 const char* part_name(Part p) {
-  static const char* names[] = {"torso", "left_leg", "right_leg", "left_foot", "right_foot",
-                                "left_arm", "right_arm", "neck", "head"};
+  static const char* names[] = {"torso",    "left_leg",  "right_leg", "left_foot", "right_foot",
+                                "left_arm", "right_arm", "neck",      "head"};
   return names[static_cast<int>(p)];
 }
 
@@ -467,8 +481,7 @@ BodyTemplate build_body_template() {
       vertex_part[v] = static_cast<int64_t>(src.part);
       const Vec3 p{src.mirror ? -verts[3 * v] : verts[3 * v], verts[3 * v + 1], verts[3 * v + 2]};
       const auto w = vertex_weights(s.part, p, base);
-      for (int j = 0; j < body::kNumJoints; ++j)
-        wa[v][src.mirror ? mirror_joint(j) : j] += w[j];
+      for (int j = 0; j < body::kNumJoints; ++j) wa[v][src.mirror ? mirror_joint(j) : j] += w[j];
     }
     for (const auto& [joint, ring] : rings.joint_ring) {
       const int j = src.mirror ? mirror_joint(joint) : joint;
@@ -486,7 +499,8 @@ BodyTemplate build_body_template() {
     Dims d = base;
     apply_direction(d, k);
     auto moved = positions(d, subdiv);
-    shapedirs.select(2, k).copy_(torch::from_blob(moved.data(), {V, 3}, torch::kFloat64) - v_template);
+    shapedirs.select(2, k).copy_(torch::from_blob(moved.data(), {V, 3}, torch::kFloat64) -
+                                 v_template);
   }
 
   auto& m = bt.model;

@@ -36,9 +36,9 @@ const char* part_name(Part p);
 // Vertex layout of one part: pole 0, then rings x segments (ring-major), then pole 1.
 struct PartLayout {
   Part part;
-  int64_t first = 0;     // index of pole 0
-  int rings = 0;         // rings between the poles
-  int segments = 0;      // vertices per ring
+  int64_t first = 0;               // index of pole 0
+  int rings = 0;                   // rings between the poles
+  int segments = 0;                // vertices per ring
   std::vector<double> ring_coord;  // per ring, the template coordinate along the part's axis
                                    // (y for torso/neck/head, -y for legs, z for feet, |x| arms)
   int64_t pole0() const { return first; }
@@ -59,9 +59,9 @@ struct Landmarks {
 };
 
 struct BodyTemplate {
-  body::SmplModel model;         // what is written as smpl_model.npz / .pkl
-  std::vector<PartLayout> parts; // indexed by Part
-  torch::Tensor vertex_part;     // (V) int64, Part of each vertex
+  body::SmplModel model;          // what is written as smpl_model.npz / .pkl
+  std::vector<PartLayout> parts;  // indexed by Part
+  torch::Tensor vertex_part;      // (V) int64, Part of each vertex
   Landmarks landmarks;
   const PartLayout& layout(Part p) const { return parts[static_cast<int>(p)]; }
 };

@@ -16,8 +16,8 @@ void validate_section(const SynthConfig& c, const std::string& path) {
   std::vector<std::string> names = c.people.train;
   names.insert(names.end(), c.people.unseen.begin(), c.people.unseen.end());
   for (size_t i = 0; i < names.size(); ++i) {
-    if (names[i].empty() || names[i].find_first_of("/\\ ") != std::string::npos || names[i] == "." ||
-        names[i] == "..")
+    if (names[i].empty() || names[i].find_first_of("/\\ ") != std::string::npos ||
+        names[i] == "." || names[i] == "..")
       fail("config key '", key("people"), "': '", names[i], "' is not a folder name");
     for (size_t j = 0; j < i; ++j)
       if (names[i] == names[j]) fail("config key '", key("people"), "': '", names[i], "' twice");
@@ -25,8 +25,8 @@ void validate_section(const SynthConfig& c, const std::string& path) {
   if (c.cameras.count < 1 || c.cameras.count > 99)
     fail("config key '", key("cameras.count"), "': must be in [1, 99], got ", c.cameras.count);
   if (c.image.width < 16 || c.image.height < 16)
-    fail("config key '", key("image"), "': images must be at least 16x16, got ", c.image.width,
-         "x", c.image.height);
+    fail("config key '", key("image"), "': images must be at least 16x16, got ", c.image.width, "x",
+         c.image.height);
   if (c.image.supersample < 1 || c.image.supersample > 4)
     fail("config key '", key("image.supersample"), "': must be in [1, 4], got ",
          c.image.supersample);

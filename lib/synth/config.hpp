@@ -19,20 +19,20 @@ struct SynthPeopleConfig {
 };
 
 struct SynthCameraConfig {
-  int count = 23;              // cameras in the ring (the 21-camera people drop 20 and 21)
-  double radius = 3.0;         // metres from the ring centre
+  int count = 23;       // cameras in the ring (the 21-camera people drop 20 and 21)
+  double radius = 3.0;  // metres from the ring centre
   double radius_jitter = 0.08;
-  double height = 1.25;        // camera height above the floor (metres), varied around the ring
+  double height = 1.25;  // camera height above the floor (metres), varied around the ring
   double height_spread = 0.3;
-  double focal = 1.15;         // focal length in units of the image width
-  double distortion = 1.0;     // scales the random lens distortion (0: none)
-  double recalibration = 0.01; // per-person jitter of the rig (metres), as a new calibration
+  double focal = 1.15;          // focal length in units of the image width
+  double distortion = 1.0;      // scales the random lens distortion (0: none)
+  double recalibration = 0.01;  // per-person jitter of the rig (metres), as a new calibration
 };
 
 struct SynthImageConfig {
   int width = 512;
   int height = 512;
-  int supersample = 2;     // anti-aliasing: s x s samples per pixel
+  int supersample = 2;  // anti-aliasing: s x s samples per pixel
   int jpeg_quality = 75;
 };
 
@@ -45,16 +45,16 @@ struct SynthNoiseConfig {
 };
 
 struct SynthSplitConfig {
-  int train_frames = 40;  // frames [0, train_frames) of the training people are for training
-  int pose_interval = 5;  // pose generalisation: later frames of the training people
-  int test_interval = 10; // identity / one-shot generalisation: the unseen people
+  int train_frames = 40;   // frames [0, train_frames) of the training people are for training
+  int pose_interval = 5;   // pose generalisation: later frames of the training people
+  int test_interval = 10;  // identity / one-shot generalisation: the unseen people
   int fitting_interval = 10;
 };
 
 struct SynthConfig {
   int64_t seed = 1;
-  int frames = 60;   // frames per person
-  int threads = 2;   // render workers
+  int frames = 60;  // frames per person
+  int threads = 2;  // render workers
   bool contact_sheet = true;
   SynthPeopleConfig people;
   SynthCameraConfig cameras;
@@ -63,12 +63,14 @@ struct SynthConfig {
   SynthSplitConfig split;
 };
 
-template <class V> void visit_fields(V& v, SynthPeopleConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthPeopleConfig& c) {
   v("train", c.train);
   v("unseen", c.unseen);
   v("shape_std", c.shape_std);
 }
-template <class V> void visit_fields(V& v, SynthCameraConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthCameraConfig& c) {
   v("count", c.count);
   v("radius", c.radius);
   v("radius_jitter", c.radius_jitter);
@@ -78,26 +80,30 @@ template <class V> void visit_fields(V& v, SynthCameraConfig& c) {
   v("distortion", c.distortion);
   v("recalibration", c.recalibration);
 }
-template <class V> void visit_fields(V& v, SynthImageConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthImageConfig& c) {
   v("width", c.width);
   v("height", c.height);
   v("supersample", c.supersample);
   v("jpeg_quality", c.jpeg_quality);
 }
-template <class V> void visit_fields(V& v, SynthNoiseConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthNoiseConfig& c) {
   v("enabled", c.enabled);
   v("pose_std", c.pose_std);
   v("rh_std", c.rh_std);
   v("th_std", c.th_std);
   v("shape_std", c.shape_std);
 }
-template <class V> void visit_fields(V& v, SynthSplitConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthSplitConfig& c) {
   v("train_frames", c.train_frames);
   v("pose_interval", c.pose_interval);
   v("test_interval", c.test_interval);
   v("fitting_interval", c.fitting_interval);
 }
-template <class V> void visit_fields(V& v, SynthConfig& c) {
+template <class V>
+void visit_fields(V& v, SynthConfig& c) {
   v("seed", c.seed);
   v("frames", c.frames);
   v("threads", c.threads);

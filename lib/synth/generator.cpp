@@ -1,12 +1,8 @@
 #include "synth/generator.hpp"
 
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/core/utility.hpp>
-#include <opencv2/imgproc.hpp>
+#include <dlfcn.h>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
-
-#include <dlfcn.h>
 
 #include <atomic>
 #include <chrono>
@@ -14,6 +10,9 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <thread>
 
 #include "body/smpl.hpp"
@@ -155,8 +154,8 @@ void remove_dataset(const fs::path& out, const SynthConfig& c) {
   std::vector<std::string> names = c.people.train;
   names.insert(names.end(), c.people.unseen.begin(), c.people.unseen.end());
   for (const auto& n : names) fs::remove_all(out / n);
-  for (const char* f : {"smpl_model.npz", "smpl_model.pkl", "split.yaml", "contact_sheet.png",
-                        kConfigFile})
+  for (const char* f :
+       {"smpl_model.npz", "smpl_model.pkl", "split.yaml", "contact_sheet.png", kConfigFile})
     fs::remove(out / f);
 }
 
@@ -233,9 +232,8 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
     r.person = make_person(body, names[i], i, unseen, c.people.shape_std, style_offset, person_rng);
     r.person.folders = FolderLayout::style_for(names[i]);
     r.person.masks = static_cast<MaskStyle>(i % 3);
-    std::vector<int> idx = r.person.folders == FolderStyle::Original21
-                               ? cameras_21(c.cameras.count)
-                               : std::vector<int>();
+    std::vector<int> idx = r.person.folders == FolderStyle::Original21 ? cameras_21(c.cameras.count)
+                                                                       : std::vector<int>();
     if (idx.empty())
       for (int k = 0; k < c.cameras.count; ++k) idx.push_back(k);
     r.layout = FolderLayout(names[i], r.person.folders, idx);
@@ -294,8 +292,10 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
     FrameParams pub = r.published[f];
 
     // True pose: skin the render mesh, stand it on the floor (z = 0).
-    const auto fit = body::lbs(body.model, torch::tensor(std::vector<double>(truth.poses.begin(), truth.poses.end()), torch::kFloat64),
-                               r.person.shapes);
+    const auto fit = body::lbs(
+        body.model,
+        torch::tensor(std::vector<double>(truth.poses.begin(), truth.poses.end()), torch::kFloat64),
+        r.person.shapes);
     auto posed = body::skin_points(r.person.mesh.rest, r.person.mesh.weights, fit.G);
     auto world = body::smpl_to_world(posed, row(truth.Rh), row(truth.Th));
     const double lift = -world.select(1, 2).min().item<double>();
@@ -305,7 +305,8 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
                  &r.person.materials};
 
     // Published fit (with noise): params and the body model's vertices for them.
-    auto poses = torch::tensor(std::vector<double>(pub.poses.begin(), pub.poses.end()), torch::kFloat64);
+    auto poses =
+        torch::tensor(std::vector<double>(pub.poses.begin(), pub.poses.end()), torch::kFloat64);
     const auto fitted = body::lbs(body.model, poses, r.published_shapes);
     auto verts = body::smpl_to_world(fitted.vertices, row(pub.Rh), row(pub.Th));
     io::Value::Dict params;
@@ -319,11 +320,11 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
 
     const double gx = truth.Th[0], gy = truth.Th[1];
     for (int k = 0; k < r.layout.num_cameras(); ++k) {
-      const RenderedView v = render_view(pm, r.views[k], c.image.width, c.image.height,
-                                         c.image.supersample, gx, gy);
+      const RenderedView v =
+          render_view(pm, r.views[k], c.image.width, c.image.height, c.image.supersample, gx, gy);
       write_image(dir / r.layout.image_path(f, k), v.bgr, jpeg);
       cv::Mat coverage = v.alpha > 0.5f;  // 255 where covered
-      cv::Mat mask = coverage / 255;       // ZJU-MoCap masks are 0/1
+      cv::Mat mask = coverage / 255;      // ZJU-MoCap masks are 0/1
       if (r.person.masks == MaskStyle::Both) {
         // Two parsers that each miss something: the matting misses hair and shoes, the part
         // parser is tighter at the edges; the loader's union restores the person (SPEC 2.1).

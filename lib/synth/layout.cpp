@@ -27,8 +27,8 @@ std::string FolderLayout::stem(int frame, int camera) const {
     const int k = ring_index_.at(camera) + 1;
     const long ms = 58130592L + 20L * frame + (7L * k) % 13;  // 16:08:50.592 + ...
     std::snprintf(buf, sizeof(buf), "%s_Camera_(%d)_%04d_2019-08-23_%02ld-%02ld-%02ld.%03ld",
-                  human_.c_str(), k, frame + 1, ms / 3600000, (ms / 60000) % 60,
-                  (ms / 1000) % 60, ms % 1000);
+                  human_.c_str(), k, frame + 1, ms / 3600000, (ms / 60000) % 60, (ms / 1000) % 60,
+                  ms % 1000);
   } else {
     std::snprintf(buf, sizeof(buf), "%06d", frame);
   }

@@ -25,7 +25,8 @@ class FolderLayout {
   // Relative to the human's folder; frame is the 0-based index into annots['ims'].
   std::string camera_folder(int camera) const;
   std::string image_path(int frame, int camera) const;
-  std::string mask_path(const std::string& kind, int frame, int camera) const;  // kind: mask|mask_cihp
+  std::string mask_path(const std::string& kind, int frame,
+                        int camera) const;  // kind: mask|mask_cihp
   std::string params_path(int frame) const;
   std::string vertices_path(int frame) const;
 

@@ -16,9 +16,25 @@ using Vec3 = std::array<double, 3>;
 
 // SMPL joint indices.
 enum Joint {
-  kLHip = 1, kRHip = 2, kSpine1 = 3, kLKnee = 4, kRKnee = 5, kSpine2 = 6, kLAnkle = 7,
-  kRAnkle = 8, kSpine3 = 9, kNeck = 12, kLCollar = 13, kRCollar = 14, kHead = 15,
-  kLShoulder = 16, kRShoulder = 17, kLElbow = 18, kRElbow = 19, kLWrist = 20, kRWrist = 21
+  kLHip = 1,
+  kRHip = 2,
+  kSpine1 = 3,
+  kLKnee = 4,
+  kRKnee = 5,
+  kSpine2 = 6,
+  kLAnkle = 7,
+  kRAnkle = 8,
+  kSpine3 = 9,
+  kNeck = 12,
+  kLCollar = 13,
+  kRCollar = 14,
+  kHead = 15,
+  kLShoulder = 16,
+  kRShoulder = 17,
+  kLElbow = 18,
+  kRElbow = 19,
+  kLWrist = 20,
+  kRWrist = 21
 };
 
 void set(Pose& p, int joint, const Vec3& r) {
@@ -57,16 +73,17 @@ struct Style {
 
 enum class Activity { Walk, Raise, Squat, Twirl, Wave, Kick, Idle, Stretch };
 const char* activity_name(Activity a) {
-  static const char* names[] = {"walk", "raise", "squat", "twirl", "wave", "kick", "idle", "stretch"};
+  static const char* names[] = {"walk", "raise", "squat", "twirl",
+                                "wave", "kick",  "idle",  "stretch"};
   return names[int(a)];
 }
 
 struct Segment {
   Activity activity;
   int start = 0, end = 0;
-  int variant = 0;          // side, raise direction, ...
-  double amount = 1.0;      // depth / amplitude
-  double direction = 1.0;   // twirl / turn direction
+  int variant = 0;         // side, raise direction, ...
+  double amount = 1.0;     // depth / amplitude
+  double direction = 1.0;  // twirl / turn direction
 };
 
 // Relaxed standing pose of the person.
@@ -146,7 +163,8 @@ Sample sample(const Segment& g, const Style& s, int t) {
       break;
     }
     case Activity::Twirl: {
-      const double e = bump(std::min(1.0, 2.5 * u)) * (u > 0.6 ? bump(1.0 - (u - 0.6) * 1.25) : 1.0);
+      const double e =
+          bump(std::min(1.0, 2.5 * u)) * (u > 0.6 ? bump(1.0 - (u - 0.6) * 1.25) : 1.0);
       const double arms = std::max(e, smooth01(u * 4.0) * smooth01((1.0 - u) * 4.0));
       set(p, kLShoulder, arm(true, s.arm_down - 1.2 * arms, 0));
       set(p, kRShoulder, arm(false, s.arm_down - 1.2 * arms, 0));
@@ -215,8 +233,8 @@ Motion make_motion(int frames, Rng& rng) {
 
   // The script: activities of 10-18 frames, overlapping by `fade` frames for cross-fades.
   const int fade = 5;
-  const std::vector<Activity> kinds = {Activity::Walk,  Activity::Raise, Activity::Squat,
-                                       Activity::Twirl, Activity::Wave,  Activity::Kick,
+  const std::vector<Activity> kinds = {Activity::Walk,  Activity::Raise,  Activity::Squat,
+                                       Activity::Twirl, Activity::Wave,   Activity::Kick,
                                        Activity::Idle,  Activity::Stretch};
   std::vector<Segment> script;
   int t = 0;

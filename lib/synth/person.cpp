@@ -188,7 +188,7 @@ class MeshBuilder {
                                    c[2] + (rz + v) * dz};
     };
     auto limit = [&](double phi) {
-      const double cb = 0.5 * (1.0 - std::cos(phi));    // 0 front, 1 back
+      const double cb = 0.5 * (1.0 - std::cos(phi));   // 0 front, 1 back
       const double sd = std::pow(std::sin(phi), 2.0);  // 1 at the sides
       return kPi * (front + (back - front) * cb + (side - 0.5 * (front + back)) * sd);
     };
@@ -269,14 +269,22 @@ class MeshBuilder {
   }
   static uint8_t skin_label(Part p) {
     switch (p) {
-      case Part::Torso: return cihp::kTorsoSkin;
-      case Part::LegL: return cihp::kLeftLeg;
-      case Part::LegR: return cihp::kRightLeg;
-      case Part::FootL: return cihp::kLeftShoe;
-      case Part::FootR: return cihp::kRightShoe;
-      case Part::ArmL: return cihp::kLeftArm;
-      case Part::ArmR: return cihp::kRightArm;
-      default: return cihp::kFace;
+      case Part::Torso:
+        return cihp::kTorsoSkin;
+      case Part::LegL:
+        return cihp::kLeftLeg;
+      case Part::LegR:
+        return cihp::kRightLeg;
+      case Part::FootL:
+        return cihp::kLeftShoe;
+      case Part::FootR:
+        return cihp::kRightShoe;
+      case Part::ArmL:
+        return cihp::kLeftArm;
+      case Part::ArmR:
+        return cihp::kRightArm;
+      default:
+        return cihp::kFace;
     }
   }
 
@@ -293,46 +301,51 @@ void dress(MeshBuilder& b, const BodyTemplate& bt, const Outfit& o) {
   const bool skirt = o.lower == Lower::Skirt;
   const double waist = lm.spine1_y - 0.015;
   const double tight = 0.009;
-  b.band(Part::Torso, 0, torso.ring_at(waist), [&](double) { return tight; }, true, kLower,
-         skirt ? cihp::kSkirt : cihp::kPants);
+  b.band(
+      Part::Torso, 0, torso.ring_at(waist), [&](double) { return tight; }, true, kLower,
+      skirt ? cihp::kSkirt : cihp::kPants);
   double hem = -lm.ankle_y - 0.03;  // leg coordinate is -y
   if (o.lower == Lower::Shorts) hem = -lm.knee_y - 0.08;
   if (skirt) hem = -lm.hip_y + 0.1;
   for (Part leg : {Part::LegL, Part::LegR}) {
     const PartLayout& l = bt.layout(leg);
     const double wide = o.lower == Lower::WideTrousers ? o.leg_wide + 0.02 : o.leg_wide;
-    b.band(leg, 0, l.ring_at(hem), [&](double t) { return tight + wide * t * t; }, true, kLower,
-           skirt ? cihp::kSkirt : cihp::kPants);
+    b.band(
+        leg, 0, l.ring_at(hem), [&](double t) { return tight + wide * t * t; }, true, kLower,
+        skirt ? cihp::kSkirt : cihp::kPants);
   }
   if (skirt) b.skirt(waist - 0.01, o.skirt_drop, o.skirt_flare, kLower);
 
   // Shirt: torso band flaring towards the hem, and sleeves.
   const int hem_ring = torso.ring_at(lm.hip_y + o.shirt_hem);
   const int top_ring = torso.ring_at(lm.neck_y - 0.012);
-  b.band(Part::Torso, hem_ring, top_ring,
-         [&](double t) { return 0.016 + o.shirt_loose * std::pow(1.0 - t, 1.5); }, false,
-         kUpper, cihp::kUpper);
+  b.band(
+      Part::Torso, hem_ring, top_ring,
+      [&](double t) { return 0.016 + o.shirt_loose * std::pow(1.0 - t, 1.5); }, false, kUpper,
+      cihp::kUpper);
   double sleeve_end = lm.shoulder_x + 0.11;
   if (o.sleeve == Sleeve::Elbow) sleeve_end = lm.elbow_x + 0.03;
   if (o.sleeve == Sleeve::Long) sleeve_end = lm.wrist_x - 0.015;
   for (Part arm : {Part::ArmL, Part::ArmR}) {
     const PartLayout& l = bt.layout(arm);
-    b.band(arm, l.ring_at(lm.shoulder_x - 0.07), l.ring_at(sleeve_end),
-           [&](double t) { return 0.012 + 0.5 * o.shirt_loose * t; }, false, kUpper,
-           cihp::kUpper);
+    b.band(
+        arm, l.ring_at(lm.shoulder_x - 0.07), l.ring_at(sleeve_end),
+        [&](double t) { return 0.012 + 0.5 * o.shirt_loose * t; }, false, kUpper, cihp::kUpper);
   }
 
   // Shoes (boots reach up the calf), hair.
   for (Part foot : {Part::FootL, Part::FootR}) {
     const PartLayout& l = bt.layout(foot);
-    b.band(foot, 0, l.rings - 1, [](double) { return 0.006; }, true, kShoes,
-           foot == Part::FootL ? cihp::kLeftShoe : cihp::kRightShoe, 0.008);
+    b.band(
+        foot, 0, l.rings - 1, [](double) { return 0.006; }, true, kShoes,
+        foot == Part::FootL ? cihp::kLeftShoe : cihp::kRightShoe, 0.008);
   }
   for (Part leg : {Part::LegL, Part::LegR}) {
     const PartLayout& l = bt.layout(leg);
     const double from = -lm.ankle_y - (o.boots ? 0.24 : 0.035);
-    b.band(leg, l.ring_at(from), l.rings - 1, [&](double) { return o.boots ? 0.014 : 0.007; },
-           true, kShoes, leg == Part::LegL ? cihp::kLeftShoe : cihp::kRightShoe);
+    b.band(
+        leg, l.ring_at(from), l.rings - 1, [&](double) { return o.boots ? 0.014 : 0.007; }, true,
+        kShoes, leg == Part::LegL ? cihp::kLeftShoe : cihp::kRightShoe);
   }
   b.hair(o.hair, o.hair_volume);
   b.finish_body();
@@ -352,13 +365,20 @@ Material material(Pattern p, Rgb c1, Rgb c2, Rgb c3, float scale, uint32_t seed,
 
 const char* pattern_name(Pattern p) {
   switch (p) {
-    case Pattern::Solid: return "plain";
-    case Pattern::Stripes: return "striped";
-    case Pattern::Checks: return "checked";
-    case Pattern::Dots: return "dotted";
-    case Pattern::Print: return "printed";
-    case Pattern::Denim: return "denim";
-    default: return "";
+    case Pattern::Solid:
+      return "plain";
+    case Pattern::Stripes:
+      return "striped";
+    case Pattern::Checks:
+      return "checked";
+    case Pattern::Dots:
+      return "dotted";
+    case Pattern::Print:
+      return "printed";
+    case Pattern::Denim:
+      return "denim";
+    default:
+      return "";
   }
 }
 
@@ -403,11 +423,15 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
   const Rgb hair = hairs[(start / 3 + index * 5) % hairs.size()];
   const Rgb lips{skin[0] * 0.85f + 0.1f, skin[1] * 0.55f, skin[2] * 0.55f};
 
-  const float hue = float(std::fmod(rng.uniform() + index * 0.618033988749895, 1.0));
-  const Rgb shirt1 = hsv(hue, float(rng.uniform(0.45, 0.85)), float(rng.uniform(0.55, 0.92)));
-  const Rgb shirt2 = rng.chance(0.5) ? hsv(hue + 0.5f, 0.6f, 0.9f)
-                                     : (rng.chance(0.5) ? Rgb{0.95f, 0.95f, 0.93f}
-                                                        : Rgb{0.08f, 0.08f, 0.1f});
+  // Shirt hues spread around the colour wheel by the golden angle from person to person.
+  const float hue =
+      float(std::fmod(start / 60.0 + index * 0.618033988749895 + 0.05 * rng.uniform(), 1.0));
+  const float saturation = float(rng.uniform(0.45, 0.85));
+  const float value = float(rng.uniform(0.55, 0.92));
+  const Rgb shirt1 = hsv(hue, saturation, value);
+  const Rgb shirt2 = rng.chance(0.5)
+                         ? hsv(hue + 0.5f, 0.6f, 0.9f)
+                         : (rng.chance(0.5) ? Rgb{0.95f, 0.95f, 0.93f} : Rgb{0.08f, 0.08f, 0.1f});
   const Rgb shirt3 = hsv(hue + 0.25f, 0.7f, 0.95f);
   const Pattern shirt_pattern = static_cast<Pattern>(slot % 5);  // Solid .. Print
   const float shirt_scale = float(rng.uniform(0.03, 0.07));
@@ -427,8 +451,8 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
     lower_pattern = skirt_patterns[(slot / 4) % 4];
   }
 
-  const std::vector<Rgb> shoes = {{0.1f, 0.1f, 0.1f}, {0.9f, 0.9f, 0.88f},
-                                  {0.4f, 0.25f, 0.12f}, {0.7f, 0.15f, 0.15f}};
+  const std::vector<Rgb> shoes = {
+      {0.1f, 0.1f, 0.1f}, {0.9f, 0.9f, 0.88f}, {0.4f, 0.25f, 0.12f}, {0.7f, 0.15f, 0.15f}};
   const Rgb shoe = shoes[(start + index) % shoes.size()];
   const Rgb sole = shoe[0] > 0.5f ? Rgb{0.2f, 0.2f, 0.2f} : Rgb{0.92f, 0.92f, 0.9f};
 
@@ -448,16 +472,14 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
   static const char* lowers_txt[] = {"trousers", "shorts", "skirt", "wide trousers"};
   static const char* hair_txt[] = {"short hair", "bob", "long hair", "buzz cut"};
   person.description = std::string(sleeves[int(o.sleeve)]) + " " + pattern_name(shirt_pattern) +
-                       " shirt, " + pattern_name(lower_pattern) + " " +
-                       lowers_txt[int(o.lower)] + ", " + hair_txt[int(o.hair)] +
-                       (o.boots ? ", boots" : "");
+                       " shirt, " + pattern_name(lower_pattern) + " " + lowers_txt[int(o.lower)] +
+                       ", " + hair_txt[int(o.hair)] + (o.boots ? ", boots" : "");
 
   // Geometry twice with one topology: on the template (texture coordinates) and on the
   // shaped body (rest positions).
   MeshBuilder canonical(bt, bt.model.v_template);
   dress(canonical, bt, o);
-  auto shaped_body =
-      bt.model.v_template + torch::matmul(bt.model.shapedirs, person.shapes);
+  auto shaped_body = bt.model.v_template + torch::matmul(bt.model.shapedirs, person.shapes);
   MeshBuilder shaped(bt, shaped_body);
   dress(shaped, bt, o);
 
@@ -468,8 +490,8 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
   mesh.rest = torch::from_blob(shaped.positions.data(), {P, 3}, torch::kFloat64).clone();
   mesh.weights =
       torch::from_blob(shaped.weights.data(), {P, body::kNumJoints}, torch::kFloat64).clone();
-  mesh.tex = torch::from_blob(canonical.positions.data(), {P, 3}, torch::kFloat64)
-                 .to(torch::kFloat32);
+  mesh.tex =
+      torch::from_blob(canonical.positions.data(), {P, 3}, torch::kFloat64).to(torch::kFloat32);
   mesh.faces = torch::from_blob(canonical.faces.data(), {Q, 3}, torch::kInt64).clone();
   mesh.face_material = canonical.material;
   mesh.face_label = canonical.label;
@@ -485,9 +507,9 @@ Person make_person(const BodyTemplate& bt, const std::string& name, int index, b
     auto a = tex.index_select(0, f.select(1, 0)), b = tex.index_select(0, f.select(1, 1)),
          c = tex.index_select(0, f.select(1, 2));
     auto n = torch::cross(b - a, c - a, 1);
-    auto centre = torch::tensor({bt.landmarks.head_center[0], bt.landmarks.head_center[1],
-                                 bt.landmarks.head_center[2]},
-                                torch::kFloat64);
+    auto centre = torch::tensor(
+        {bt.landmarks.head_center[0], bt.landmarks.head_center[1], bt.landmarks.head_center[2]},
+        torch::kFloat64);
     auto inward = (n * ((a + b + c) / 3.0 - centre)).sum(1) < 0;
     auto swapped = f.index({torch::indexing::Slice(), torch::tensor({0, 2, 1})});
     f.copy_(torch::where(inward.unsqueeze(1), swapped, f));

@@ -31,9 +31,9 @@ struct RenderMesh {
 
 // How the person's folder is laid out (SPEC 1.1).
 enum class FolderStyle {
-  Standard,   // Camera_B{n}/{frame:06d}.jpg, new_params/, new_vertices/, 23 cameras
-  Original21, // CoreView_313/315: "Camera (k)" folders, long original names, 21 cameras
-  Params396,  // CoreView_396: params/ and vertices/ instead of new_params/, new_vertices/
+  Standard,    // Camera_B{n}/{frame:06d}.jpg, new_params/, new_vertices/, 23 cameras
+  Original21,  // CoreView_313/315: "Camera (k)" folders, long original names, 21 cameras
+  Params396,   // CoreView_396: params/ and vertices/ instead of new_params/, new_vertices/
 };
 // Which masks exist: mask/ only, mask_cihp/ only, or both with different coverage.
 enum class MaskStyle { Mask, Cihp, Both };
@@ -44,7 +44,7 @@ struct Person {
   bool unseen = false;
   FolderStyle folders = FolderStyle::Standard;
   MaskStyle masks = MaskStyle::Mask;
-  torch::Tensor shapes;  // (10) float64, the true shape coefficients
+  torch::Tensor shapes;     // (10) float64, the true shape coefficients
   std::string description;  // one line: outfit and hair, for the summary
   std::vector<Material> materials;
   RenderMesh mesh;

@@ -46,7 +46,8 @@ std::string encode_mask_png(const cv::Mat& image) {
   std::string ihdr;
   put_u32(ihdr, uint32_t(w));
   put_u32(ihdr, uint32_t(h));
-  ihdr += std::string("\x08\x00\x00\x00\x00", 5);  // 8 bits, greyscale, deflate, no filter, no interlace
+  ihdr += std::string("\x08\x00\x00\x00\x00",
+                      5);  // 8 bits, greyscale, deflate, no filter, no interlace
   chunk(out, "IHDR", ihdr);
   chunk(out, "IDAT", packed);
   chunk(out, "IEND", "");

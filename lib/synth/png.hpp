@@ -4,7 +4,6 @@
 // which no filter plus run-length deflate is both smaller and about ten times faster.
 
 #include <opencv2/core.hpp>
-
 #include <string>
 
 namespace th::synth {

@@ -1,10 +1,10 @@
 #include "synth/render.hpp"
 
-#include <opencv2/imgproc.hpp>
 #include <torch/torch.h>
 
 #include <cmath>
 #include <limits>
+#include <opencv2/imgproc.hpp>
 
 #include "geometry/camera.hpp"
 #include "render/raster.hpp"
@@ -49,11 +49,12 @@ Rgb studio_colour(const double* c, const double* d, float* floor_xy) {
   Rgb col{0.3f, 0.315f, 0.35f};
   if (seam < 0.03) col = {0.22f, 0.22f, 0.25f};
   if (z > 0.95 && z < 1.05) col = {0.5f, 0.48f, 0.42f};  // a rail around the room
-  if (z < 0.12) col = {0.2f, 0.2f, 0.22f};                // skirting board
+  if (z < 0.12) col = {0.2f, 0.2f, 0.22f};               // skirting board
   return col;
 }
 
-uint8_t to_byte(float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); }
+// Rounds to nearest (v is clamped to [0, 1] first, so adding 0.5 and truncating is exact).
+uint8_t to_byte(float v) { return uint8_t(std::clamp(v, 0.0f, 1.0f) * 255.0f + 0.5f); }
 
 }  // namespace
 
@@ -107,7 +108,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
     auto cam = geometry::world_to_camera(torch::tensor(rim, torch::kFloat64).reshape({16, 3}),
                                          view.cam.R, view.cam.T);
     if (cam.select(1, 2).min().item<double>() > 0.1) {
-      auto px = geometry::distort_pixels(geometry::project(cam, view.cam.K), view.cam.K, view.cam.D);
+      auto px =
+          geometry::distort_pixels(geometry::project(cam, view.cam.K), view.cam.K, view.cam.D);
       const int bx0 = std::max(0, int(std::floor(px.select(1, 0).min().item<double>())));
       const int by0 = std::max(0, int(std::floor(px.select(1, 1).min().item<double>())));
       const int bx1 = std::min(width, int(std::ceil(px.select(1, 0).max().item<double>())) + 1);
@@ -123,8 +125,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
       const double dx = fxy[2 * x] - ground_x, dy = fxy[2 * x + 1] - ground_y;
       const double d2 = dx * dx + dy * dy;
       if (d2 > 0.64) continue;
-      const double shade = 1.0 - 0.5 * std::exp(-d2 / (2 * 0.2 * 0.2));
-      for (int c = 0; c < 3; ++c) out[3 * x + c] = uint8_t(std::lround(out[3 * x + c] * shade));
+      const float shade = float(1.0 - 0.5 * std::exp(-d2 / (2 * 0.2 * 0.2)));
+      for (int c = 0; c < 3; ++c) out[3 * x + c] = uint8_t(out[3 * x + c] * shade + 0.5f);
     }
   }
 
@@ -145,7 +147,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
   K[1][2] += (s - 1) / 2.0 - s * y0;
   render::RasterOptions options;
   options.cull = mesh.cull;
-  const render::Raster raster = render::rasterize(verts_cam, mesh.faces, K, cw * s, ch * s, options);
+  const render::Raster raster =
+      render::rasterize(verts_cam, mesh.faces, K, cw * s, ch * s, options);
 
   auto verts = posed.verts.to(torch::kFloat32).contiguous();
   auto normals = posed.normals.to(torch::kFloat32).contiguous();
@@ -189,7 +192,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
           for (auto& cand : groups)
             if (cand.material == material && std::abs(cand.depth - depth[pix]) < 0.02f) g = &cand;
           if (!g) {
-            groups.push_back(Group{material, 0, mesh.face_label[f], depth[pix], {0, 0, 0}, {0, 0, 0}, {0, 0, 0}});
+            groups.push_back(Group{
+                material, 0, mesh.face_label[f], depth[pix], {0, 0, 0}, {0, 0, 0}, {0, 0, 0}});
             g = &groups.back();
           }
           const float* b = bary + 3 * pix;
@@ -224,7 +228,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
         }
         double light = kAmbient;
         for (const Light& l : kLights)
-          light += l.power * std::max(0.0, g.n[0] * l.dir[0] + g.n[1] * l.dir[1] + g.n[2] * l.dir[2]);
+          light +=
+              l.power * std::max(0.0, g.n[0] * l.dir[0] + g.n[1] * l.dir[1] + g.n[2] * l.dir[2]);
         const Rgb a = albedo(materials[g.material], g.t);
         const float k = float(light) * inside * float(g.count) * inv;
         out[0] += a[0] * k, out[1] += a[1] * k, out[2] += a[2] * k;
@@ -237,7 +242,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
   std::vector<double> outline;
   for (int i = 0; i <= 16; ++i) {
     const double fx = x0 - 2 + (cw + 3) * i / 16.0, fy = y0 - 2 + (ch + 3) * i / 16.0;
-    for (double v : {fx, double(y0 - 2), fx, double(y1 + 2), double(x0 - 2), fy, double(x1 + 2), fy})
+    for (double v :
+         {fx, double(y0 - 2), fx, double(y1 + 2), double(x0 - 2), fy, double(x1 + 2), fy})
       outline.push_back(v);
   }
   auto d = geometry::distort_pixels(torch::tensor(outline, torch::kFloat64).reshape({-1, 2}),
@@ -248,7 +254,8 @@ RenderedView render_view(const PosedMesh& posed, const StudioView& view, int wid
   const int dy1 = std::min(height - 1, int(std::ceil(d.select(1, 1).max().item<double>())) + 1);
   if (dx0 > dx1 || dy0 > dy1) return r;
   const cv::Rect roi(dx0, dy0, dx1 - dx0 + 1, dy1 - dy0 + 1);
-  std::pair<cv::Mat, cv::Mat> maps{view.maps.first(roi) - float(x0), view.maps.second(roi) - float(y0)};
+  std::pair<cv::Mat, cv::Mat> maps{view.maps.first(roi) - float(x0),
+                                   view.maps.second(roi) - float(y0)};
   const cv::Mat fg_d = geometry::distort_image(fg, maps, cv::INTER_LINEAR);
   geometry::distort_image(labels, maps, cv::INTER_NEAREST).copyTo(r.labels(roi));
 

@@ -1,13 +1,14 @@
 #pragma once
 // Images of the synthetic studio: the clothed, textured person rasterised (lib/render) with
-// Lambertian shading under a fixed key light, a fill light and ambient light, anti-aliased by
-// supersampling, composited over a studio background (floor, walls, a contact shadow) and
-// passed through the camera's lens distortion, so that cv::undistort(img, K, D) gives back the
-// pinhole image (SPEC 2.1).
+// Lambertian shading under a fixed key light, a fill light and ambient light, anti-aliased with
+// supersample^2 coverage samples per pixel (shaded once per visible surface per pixel, as in
+// multisample anti-aliasing), composited over a studio background (floor, walls, a contact
+// shadow) and passed through the camera's lens distortion, so that cv::undistort(img, K, D)
+// gives back the pinhole image (SPEC 2.1). Masks come from the coverage.
 
-#include <opencv2/core.hpp>
 #include <torch/types.h>
 
+#include <opencv2/core.hpp>
 #include <utility>
 #include <vector>
 

@@ -13,6 +13,16 @@ constexpr double kPi = 3.14159265358979323846;
 torch::Tensor vec3(double x, double y, double z) {
   return torch::tensor({x, y, z}, torch::kFloat64);
 }
+
+// Three draws in a fixed order (function arguments are evaluated in an unspecified order,
+// which would make the dataset depend on the compiler).
+template <class Draw>
+torch::Tensor draw3(Draw draw) {
+  const double x = draw();
+  const double y = draw();
+  const double z = draw();
+  return vec3(x, y, z);
+}
 }  // namespace
 
 std::vector<CameraCalib> make_ring(const SynthCameraConfig& c, int width, int height, Rng& rng) {
@@ -23,7 +33,7 @@ std::vector<CameraCalib> make_ring(const SynthCameraConfig& c, int width, int he
     // Alternate high and low cameras so that neighbouring views differ in elevation too.
     const double h = c.height + c.height_spread * ((i % 2) ? 0.5 : -0.5) + rng.uniform(-0.05, 0.05);
     auto eye = vec3(radius * std::cos(angle), radius * std::sin(angle), h);
-    auto target = vec3(rng.uniform(-0.05, 0.05), rng.uniform(-0.05, 0.05), 0.9 + rng.uniform(-0.05, 0.05));
+    auto target = draw3([&] { return rng.uniform(-0.05, 0.05); }) + vec3(0.0, 0.0, 0.9);
     auto [R, T] = geometry::look_at(eye, target, vec3(0, 0, 1));
     // A small roll about the optical axis.
     const double roll = rng.uniform(-0.02, 0.02);
@@ -32,8 +42,8 @@ std::vector<CameraCalib> make_ring(const SynthCameraConfig& c, int width, int he
 
     const double f = c.focal * width * (1.0 + rng.uniform(-0.03, 0.03));
     const double px = width / 512.0;
-    auto K = torch::tensor({f, 0.0, (width - 1) / 2.0 + rng.uniform(-4.0, 4.0) * px,
-                            0.0, f * (1.0 + rng.uniform(-0.002, 0.002)),
+    auto K = torch::tensor({f, 0.0, (width - 1) / 2.0 + rng.uniform(-4.0, 4.0) * px, 0.0,
+                            f * (1.0 + rng.uniform(-0.002, 0.002)),
                             (height - 1) / 2.0 + rng.uniform(-4.0, 4.0) * px, 0.0, 0.0, 1.0},
                            torch::kFloat64)
                  .reshape({3, 3});
@@ -48,16 +58,14 @@ std::vector<CameraCalib> make_ring(const SynthCameraConfig& c, int width, int he
 }
 
 std::vector<CameraCalib> recalibrate(const std::vector<CameraCalib>& ring,
-                                     const std::vector<int>& indices,
-                                     const SynthCameraConfig& c, Rng& rng) {
+                                     const std::vector<int>& indices, const SynthCameraConfig& c,
+                                     Rng& rng) {
   std::vector<CameraCalib> out;
   for (int i : indices) {
     const CameraCalib& base = ring.at(i);
     const double r = c.recalibration;
-    auto centre = geometry::camera_center(base.R, base.T) +
-                  vec3(rng.normal(0, r), rng.normal(0, r), rng.normal(0, r));
-    auto turn = geometry::rodrigues(vec3(rng.normal(0, r / 3), rng.normal(0, r / 3),
-                                         rng.normal(0, r / 3)));
+    auto centre = geometry::camera_center(base.R, base.T) + draw3([&] { return rng.normal(0, r); });
+    auto turn = geometry::rodrigues(draw3([&] { return rng.normal(0, r / 3); }));
     CameraCalib cam = base;
     cam.R = torch::matmul(turn, base.R);
     cam.T = -torch::matmul(cam.R, centre).reshape({3, 1});

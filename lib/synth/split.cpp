@@ -35,41 +35,43 @@ std::string split_yaml(const SynthConfig& c) {
   const int train = std::min(c.split.train_frames, c.frames);
 
   std::ostringstream o;
-  o << "# Human splits of the synthetic dataset: the protocols of SPEC 1.2 over the people and\n"
-       "# frames that transhuman-synth generates (written by it; this copy is for\n"
-       "# configs/synth/default.yaml, each generated dataset also holds its own split.yaml).\n"
+  o << "# Splits of the synthetic dataset: the protocols of SPEC 1.2 over the people and frames\n"
+       "# that transhuman-synth generates. Written by it: this copy is the split of\n"
+       "# configs/synth/default.yaml; every generated dataset also holds its own split.yaml.\n"
        "#\n"
-       "# Schema:\n"
-       "#   dataset: synthetic\n"
+       "# Schema (shared by every file in data_splits/, see zju_mocap.yaml):\n"
        "#   settings:\n"
-       "#     <setting>:                  training | pose | identity | one_shot | fitting\n"
-       "#       humans:                   list of {human, begin, ni, interval}; the frames of a\n"
-       "#                                 human are ims[begin : begin + ni][::interval]\n"
-       "#       reference_views: [...]    calibration indices of the input views; [] = random\n"
-       "#       num_reference_views: n    how many random reference views when the list is []\n"
-       "#                                 (drawn from all cameras, may include the target)\n"
-       "#       target_views: [...]       calibration indices of the views to render;\n"
-       "#                                 [] = every camera (training: one random per sample)\n"
-       "dataset: synthetic\n"
+       "#     <name>:                      training | pose | identity | one_shot | fitting\n"
+       "#       reference_views: [i, ...]  fixed calibration indices, or `random`\n"
+       "#       num_reference_views: N     with `random`: N cameras drawn per sample (may include\n"
+       "#                                  the target)\n"
+       "#       target_views: [i, ...]     or `all`: every camera of every frame is a sample\n"
+       "#       humans:                    frames of a human are ims[begin : "
+       "begin+ni][::interval]\n"
+       "#         - {name: <folder>, begin: B, ni: N, interval: I}\n"
+       "# Training people: frames [0, "
+    << train
+    << ") for training, the rest for pose\n"
+       "# generalisation; the unseen people for identity generalisation and one-shot.\n"
        "settings:\n";
   auto setting = [&](const char* name, const std::vector<std::string>& humans, Range r,
-                     const std::vector<int>& ref, int num_ref, const std::vector<int>& tgt) {
-    o << "  " << name << ":\n    humans:\n";
+                     const std::vector<int>& ref, const std::vector<int>& tgt) {
+    o << "  " << name << ":\n";
+    if (ref.empty())
+      o << "    reference_views: random\n    num_reference_views: 3\n";
+    else
+      o << "    reference_views: " << view_list(ref) << "\n";
+    o << "    target_views: " << (tgt.empty() ? std::string("all") : view_list(tgt)) << "\n";
+    o << "    humans:\n";
     for (const auto& h : humans)
-      o << "      - {human: " << h << ", begin: " << r.begin << ", ni: " << r.ni
+      o << "      - {name: " << h << ", begin: " << r.begin << ", ni: " << r.ni
         << ", interval: " << r.interval << "}\n";
-    o << "    reference_views: " << view_list(ref) << "\n"
-      << "    num_reference_views: " << num_ref << "\n"
-      << "    target_views: " << view_list(tgt) << "\n";
   };
-  setting("training", c.people.train, {0, train, 1}, {}, 3, {});
-  setting("pose", c.people.train, {train, c.frames - train, c.split.pose_interval}, refs,
-          int(refs.size()), targets);
-  setting("identity", c.people.unseen, {0, c.frames, c.split.test_interval}, refs,
-          int(refs.size()), targets);
-  setting("one_shot", c.people.unseen, {0, c.frames, c.split.test_interval}, {0}, 1, targets);
-  setting("fitting", c.people.train, {0, train, c.split.fitting_interval}, refs,
-          int(refs.size()), targets);
+  setting("training", c.people.train, {0, train, 1}, {}, {});
+  setting("pose", c.people.train, {train, c.frames - train, c.split.pose_interval}, refs, targets);
+  setting("identity", c.people.unseen, {0, c.frames, c.split.test_interval}, refs, targets);
+  setting("one_shot", c.people.unseen, {0, c.frames, c.split.test_interval}, {0}, targets);
+  setting("fitting", c.people.train, {0, train, c.split.fitting_interval}, refs, targets);
   return o.str();
 }
 

@@ -84,12 +84,18 @@ Rgb hsv(float h, float s, float v) {
   const int i = static_cast<int>(h);
   const float f = h - i, p = v * (1 - s), q = v * (1 - s * f), t = v * (1 - s * (1 - f));
   switch (i) {
-    case 0: return {v, t, p};
-    case 1: return {q, v, p};
-    case 2: return {p, v, t};
-    case 3: return {p, q, v};
-    case 4: return {t, p, v};
-    default: return {v, p, q};
+    case 0:
+      return {v, t, p};
+    case 1:
+      return {q, v, p};
+    case 2:
+      return {p, v, t};
+    case 3:
+      return {p, q, v};
+    case 4:
+      return {t, p, v};
+    default:
+      return {v, p, q};
   }
 }
 
@@ -106,7 +112,8 @@ Rgb albedo(const Material& m, const float* p) {
     case Pattern::Checks: {
       const float u = p[0] / m.scale, v = p[1] / m.scale, w = p[2] / m.scale;
       const int parity = (static_cast<int>(std::floor(u)) + static_cast<int>(std::floor(v)) +
-                          static_cast<int>(std::floor(w))) & 1;
+                          static_cast<int>(std::floor(w))) &
+                         1;
       c = parity ? m.c2 : m.c1;
       const float line = std::min({std::abs(fract(u) - 0.5f), std::abs(fract(v) - 0.5f)});
       if (line < 0.06f) c = mix(c, m.c3, 0.7f);

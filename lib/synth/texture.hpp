@@ -27,8 +27,8 @@ enum class Pattern : uint8_t {
 struct Material {
   Pattern pattern = Pattern::Solid;
   Rgb c1{0.5f, 0.5f, 0.5f}, c2{0.2f, 0.2f, 0.2f}, c3{0.8f, 0.8f, 0.8f};
-  float scale = 0.05f;    // pattern period (metres, canonical space)
-  float detail = 0.08f;   // amplitude of the fine grain
+  float scale = 0.05f;   // pattern period (metres, canonical space)
+  float detail = 0.08f;  // amplitude of the fine grain
   int variant = 0;
   uint32_t seed = 0;
   const Landmarks* landmarks = nullptr;  // template landmarks (face, soles, chest)
@@ -37,7 +37,8 @@ struct Material {
 // Albedo of the material at canonical point p (3 floats).
 Rgb albedo(const Material& m, const float* p);
 
-// Value noise in [0, 1) at p / cell (trilinear, smooth), reproducible from the seed.
+// Value noise in [0, 1) at (x, y, z) on a unit lattice (smooth trilinear interpolation of
+// hashed lattice values), reproducible from the seed.
 float value_noise(float x, float y, float z, uint32_t seed);
 
 // HSV (h in [0, 1), s, v in [0, 1]) to RGB.

@@ -2,8 +2,9 @@
 // (tests/python/lbs_reference.py, rotations from scipy), on a random model with non-zero pose
 // blend shapes, through both file formats.
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+
+#include <catch2/catch.hpp>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
@@ -42,12 +43,12 @@ SmplModel random_model(int64_t V, int64_t S, uint64_t seed) {
 
 }  // namespace
 
-TEST_CASE("SMPL joint tree and names are SMPL's", "[body]") {
+TEST_CASE("the joint tree and names are SMPL's", "[body]") {
   CHECK(std::string(kJointNames[0]) == "pelvis");
   CHECK(std::string(kJointNames[15]) == "head");
   CHECK(std::string(kJointNames[23]) == "right_hand");
-  const std::array<int, 24> expected = {-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8,
-                                        9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21};
+  const std::array<int, 24> expected = {-1, 0, 0, 0,  1,  2,  3,  4,  5,  6,  7,  8,
+                                        9,  9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21};
   CHECK(kParents == expected);
 }
 
@@ -62,7 +63,7 @@ TEST_CASE("lbs at zero pose and shape rotates nothing and returns the template",
   CHECK(torch::allclose(r.posed_joints, r.joints, 0, 1e-15));
 }
 
-TEST_CASE("lbs agrees with an independent numpy implementation (float64, 1e-9)", "[body]") {
+TEST_CASE("lbs agrees with an independent numpy implementation to 1e-9 in float64", "[body]") {
   const auto dir = th::test::scratch_dir("body_lbs");
   auto m = random_model(80, 10, 2);
   torch::manual_seed(7);

@@ -1,10 +1,11 @@
 // Camera geometry (lib/geometry/camera): checked against OpenCV's own implementations
 // (cv::Rodrigues, cv::projectPoints, cv::undistort) and hand calculations.
 
+#include <torch/torch.h>
+
 #include <catch2/catch.hpp>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
-#include <torch/torch.h>
 
 #include "geometry/camera.hpp"
 
@@ -22,7 +23,7 @@ torch::Tensor D_small() {
 
 }  // namespace
 
-TEST_CASE("rodrigues matches cv::Rodrigues, also for tiny and large angles", "[geometry]") {
+TEST_CASE("rodrigues matches cv::Rodrigues also for tiny and large angles", "[geometry]") {
   torch::manual_seed(3);
   auto r = torch::randn({20, 3}, torch::kFloat64);
   r[0] = torch::tensor({1e-9, -2e-9, 5e-10}, torch::kFloat64);
@@ -78,7 +79,7 @@ TEST_CASE("project_points with distortion matches cv::projectPoints", "[geometry
   CHECK(torch::allclose(undistort_pixels(ours, K, D), project(cam, K), 0, 1e-8));
 }
 
-TEST_CASE("camera_center and look_at put the camera where asked, looking at the target",
+TEST_CASE("camera_center and look_at put the camera where asked looking at the target",
           "[geometry]") {
   auto eye = torch::tensor({3.0, 1.0, 1.5}, torch::kFloat64);
   auto target = torch::tensor({0.0, 0.2, 0.9}, torch::kFloat64);
@@ -91,12 +92,12 @@ TEST_CASE("camera_center and look_at put the camera where asked, looking at the 
   CHECK(t_cam[0][0].item<double>() == Approx(0.0).margin(1e-12));
   CHECK(t_cam[0][1].item<double>() == Approx(0.0).margin(1e-12));
   CHECK(t_cam[0][2].item<double>() > 0);
-  auto above = world_to_camera((target + torch::tensor({0.0, 0.0, 0.5}, torch::kFloat64)).reshape({1, 3}), R, T);
+  auto above = world_to_camera(
+      (target + torch::tensor({0.0, 0.0, 0.5}, torch::kFloat64)).reshape({1, 3}), R, T);
   CHECK(above[0][1].item<double>() < 0);
 }
 
-TEST_CASE("distortion maps send each distorted pixel to the pinhole pixel it shows",
-          "[geometry]") {
+TEST_CASE("distortion maps send each distorted pixel to the pinhole pixel it shows", "[geometry]") {
   auto K = K_512(), D = D_small();
   const int w = 512, h = 512;
   auto maps = distortion_maps(K, D, w, h);
@@ -132,7 +133,8 @@ TEST_CASE("cv::undistort of a distorted image gives back the pinhole image", "[g
   cv::Mat back;
   cv::undistort(distorted, back, to_cv(K), to_cv(D));
   cv::Mat diff;
-  cv::absdiff(back(cv::Rect(24, 24, w - 48, h - 48)), pinhole(cv::Rect(24, 24, w - 48, h - 48)), diff);
+  cv::absdiff(back(cv::Rect(24, 24, w - 48, h - 48)), pinhole(cv::Rect(24, 24, w - 48, h - 48)),
+              diff);
   double max_err = 0;
   cv::minMaxLoc(diff, nullptr, &max_err);
   CHECK(max_err < 0.01);

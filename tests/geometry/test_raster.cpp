@@ -2,8 +2,9 @@
 // independent point-in-triangle test, depth by ray-plane intersection, barycentrics that
 // reproduce the 3D point seen through the pixel.
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+
+#include <catch2/catch.hpp>
 
 #include "geometry/camera.hpp"
 #include "geometry/mesh.hpp"
@@ -80,8 +81,8 @@ TEST_CASE("depth is the camera z of the surface and barycentrics are perspective
 }
 
 TEST_CASE("the nearer of two overlapping triangles wins", "[raster]") {
-  auto verts = torch::tensor({-1.0, -1.0, 3.0, 1.0, -1.0, 3.0, 0.0, 1.0, 3.0,    // far
-                              -1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0},   // near
+  auto verts = torch::tensor({-1.0, -1.0, 3.0, 1.0, -1.0, 3.0, 0.0, 1.0, 3.0,   // far
+                              -1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0},  // near
                              torch::kFloat64)
                    .reshape({6, 3});
   for (bool near_first : {true, false}) {
@@ -122,7 +123,8 @@ TEST_CASE("interpolate blends vertex attributes with the barycentrics", "[raster
   CHECK(pos[0][0].abs().sum().item<float>() == 0.0f);
 }
 
-TEST_CASE("vertex normals of a closed mesh point outwards; volume of a cube", "[geometry]") {
+TEST_CASE("vertex normals of a closed mesh point outwards and a unit cube has volume 1",
+          "[geometry]") {
   // Unit cube, faces wound counter-clockwise seen from outside.
   auto v = torch::tensor({0., 0., 0., 1., 0., 0., 1., 1., 0., 0., 1., 0.,
                           0., 0., 1., 1., 0., 1., 1., 1., 1., 0., 1., 1.},

@@ -56,12 +56,18 @@ TEST_CASE("every parameter receives a finite gradient from one training step", "
   test::center_density(*model, frame);
   const auto loss = render_loss(*model, frame, 12, 16, true);
   loss.backward();
+  // The one legitimate exception: the key bias of the view attention (fdi.key0.bias) adds
+  // q_v . b to every key view j alike, and the softmax over j ignores it, so its gradient is
+  // zero up to rounding (also in the reference network).
+  const double key_bias_grad = model->fdi->key0->bias.grad().abs().max().item<double>();
+  const double key_weight_grad = model->fdi->key0->weight.grad().abs().max().item<double>();
+  CHECK(key_bias_grad <= 1e-6 * key_weight_grad);
   std::vector<std::string> missing, non_finite, zero;
   for (const auto& p : model->named_parameters()) {
     const auto& g = p.value().grad();
     if (!g.defined()) missing.push_back(p.key());
     else if (!torch::isfinite(g).all().item<bool>()) non_finite.push_back(p.key());
-    else if (g.abs().max().item<double>() == 0) zero.push_back(p.key());
+    else if (g.abs().max().item<double>() == 0 && p.key() != "fdi.key0.bias") zero.push_back(p.key());
   }
   std::string names;
   for (const auto& k : missing) names += "\n  no gradient: " + k;
@@ -92,8 +98,8 @@ TEST_CASE("checkpointed chunks give the same loss and gradients as plain autogra
   CHECK(l1 == Approx(l2).epsilon(1e-6));
   for (const auto& [k, g] : g1) {
     INFO(k);
-    const double scale = g.abs().max().item<double>() + 1e-12;
-    CHECK((g - g2.at(k)).abs().max().item<double>() < 1e-4 * scale);
+    const double scale = g.abs().max().item<double>();
+    CHECK((g - g2.at(k)).abs().max().item<double>() <= 1e-4 * scale + 1e-9);
   }
 }
 

@@ -144,7 +144,7 @@ TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradie
   auto run = [&](bool fused) {
     const auto qq = q.narrow(2, 0, 128), k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256),
                r = q.narrow(2, 128, 256);
-    return fused ? FDIImpl::attend(qq, k, u, r) : torch::baddbmm(r, FDIImpl::attention(qq, k), u);
+    return fused ? FDIImpl::attend(q, kv, 128) : torch::baddbmm(r, FDIImpl::attention(qq, k), u);
   };
   const auto g = torch::randn({n, V, 256}, torch::kDouble);
   const auto a = run(true), b = run(false);

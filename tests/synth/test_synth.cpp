@@ -2,14 +2,14 @@
 // geometry (checked by numpy in tests/python/check_synth.py), determinism, and the rules for
 // an existing output folder.
 
-#include <catch2/catch.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <fstream>
 #include <map>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "body/smpl.hpp"
@@ -69,7 +69,7 @@ double height(const torch::Tensor& v) {
 
 }  // namespace
 
-TEST_CASE("the body model has SMPL's form: tree, closed parts, weights, regressor",
+TEST_CASE("the body model has SMPL's form: tree and closed parts and weights and regressor",
           "[synth][body]") {
   const BodyTemplate bt = build_body_template();
   const auto& m = bt.model;
@@ -92,10 +92,10 @@ TEST_CASE("the body model has SMPL's form: tree, closed parts, weights, regresso
   CHECK(height(m.v_template) < 1.85);
   auto J = torch::matmul(m.J_regressor, m.v_template);
   CHECK(J[0].abs().max().item<double>() < 1e-9);
-  CHECK(J[15][1].item<double>() > J[12][1].item<double>());                     // head above neck
-  CHECK(J[20][0].item<double>() > 0.6);                                         // left wrist at +x
+  CHECK(J[15][1].item<double>() > J[12][1].item<double>());  // head above neck
+  CHECK(J[20][0].item<double>() > 0.6);                      // left wrist at +x
   CHECK(J[21][0].item<double>() < -0.6);
-  CHECK(std::abs(J[20][1].item<double>() - J[16][1].item<double>()) < 0.02);    // arms level
+  CHECK(std::abs(J[20][1].item<double>() - J[16][1].item<double>()) < 0.02);  // arms level
   // Each part is a closed surface with outward faces.
   auto faces = m.faces;
   auto part_of_face = bt.vertex_part.index_select(0, faces.select(1, 0));
@@ -116,7 +116,9 @@ TEST_CASE("shape directions mean what they say and joints follow the shape", "[s
     return th::body::lbs(m, torch::zeros({72}, torch::kFloat64), beta);
   };
   auto base = shaped(0, 0.0);
-  auto dist = [](const torch::Tensor& J, int a, int b) { return (J[a] - J[b]).norm().item<double>(); };
+  auto dist = [](const torch::Tensor& J, int a, int b) {
+    return (J[a] - J[b]).norm().item<double>();
+  };
   // 0: stature.
   CHECK(height(shaped(0, 1.0).vertices) > height(base.vertices) + 0.04);
   // 1: girth: the waist ring gets wider.
@@ -140,7 +142,8 @@ TEST_CASE("shape directions mean what they say and joints follow the shape", "[s
   auto r = th::body::lbs(m, torch::zeros({72}, torch::kFloat64), beta);
   const auto& leg = bt.layout(Part::LegL);
   const int knee_ring = leg.ring_at(-bt.landmarks.knee_y);
-  auto ring = torch::stack({r.v_shaped[leg.vertex(knee_ring, 0)], r.v_shaped[leg.vertex(knee_ring, leg.segments / 2)]});
+  auto ring = torch::stack(
+      {r.v_shaped[leg.vertex(knee_ring, 0)], r.v_shaped[leg.vertex(knee_ring, leg.segments / 2)]});
   CHECK(torch::allclose(ring.mean(0), r.joints[4], 0, 1e-9));
 }
 
@@ -175,7 +178,8 @@ TEST_CASE("folder layouts follow ZJU-MoCap's three naming schemes", "[synth]") {
   CHECK(idx[20] == 22);
   FolderLayout original("CoreView_313", FolderStyle::Original21, idx);
   CHECK(original.camera_folder(20) == "Camera (23)");
-  CHECK(original.image_path(0, 0) == "Camera (1)/CoreView_313_Camera_(1)_0001_2019-08-23_16-08-50.599.jpg");
+  CHECK(original.image_path(0, 0) ==
+        "Camera (1)/CoreView_313_Camera_(1)_0001_2019-08-23_16-08-50.599.jpg");
   CHECK(original.params_path(0) == "new_params/1.npy");
   FolderLayout p396("CoreView_396", FolderStyle::Params396, {0});
   CHECK(p396.params_path(3) == "params/3.npy");
@@ -192,26 +196,31 @@ TEST_CASE("mask PNGs read back unchanged", "[synth]") {
   CHECK(cv::countNonZero(back != m) == 0);
 }
 
-TEST_CASE("configs: default.yaml states the defaults; data_splits/synthetic.yaml is its split",
+TEST_CASE("default.yaml states the defaults and data_splits/synthetic.yaml is its split",
           "[synth]") {
   const auto from_file = th::config::load<SynthConfig>("configs/synth/default.yaml");
   CHECK(config_text(from_file) == config_text(SynthConfig{}));
   CHECK(read_all("data_splits/synthetic.yaml") == split_yaml(from_file));
   const std::string split = split_yaml(from_file);
-  CHECK(split.find("  identity:\n    humans:\n      - {human: CoreView_s08, begin: 0, ni: 60, interval: 10}") != std::string::npos);
+  CHECK(split.find("      - {name: CoreView_s08, begin: 0, ni: 60, interval: 10}") !=
+        std::string::npos);
+  CHECK(split.find("  training:\n    reference_views: random\n    num_reference_views: 3\n"
+                   "    target_views: all\n") != std::string::npos);
   CHECK(split.find("reference_views: [0, 7, 15]") != std::string::npos);
   CHECK(split.find("target_views: [3, 5, 10, 12, 18, 20]") != std::string::npos);
   CHECK_THROWS_WITH(tiny({"frames=0"}), Catch::Contains("frames"));
   CHECK_THROWS_WITH(tiny({"people.unseen=[CoreView_313]"}), Catch::Contains("CoreView_313"));
 }
 
-TEST_CASE("tiny dataset (noise off): numpy finds SPEC 1.1's structure, vertices fall in the "
-          "masks, cameras lie on the ring",
-          "[synth][python]") {
+TEST_CASE(
+    "tiny dataset with noise off: numpy finds SPEC 1.1's structure and vertices fall in "
+    "the masks and cameras lie on the ring",
+    "[synth][python]") {
   const auto dir = th::test::scratch_dir("synth_geometry");
   const auto start = std::chrono::steady_clock::now();
   const Summary s = generate(tiny({"noise.enabled=false"}), dir / "data", false);
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   CHECK(s.people == 3);
   CHECK(s.images == 4 * (21 + 23 + 23));
   CHECK(seconds < 30.0);  // "in seconds": about 3 s on an idle 2-core machine
@@ -232,17 +241,18 @@ TEST_CASE("annots and params read back in C++ equal to numpy's reading", "[synth
   const auto dir = th::test::scratch_dir("synth_readback");
   generate(tiny(), dir / "data", false);
   fs::create_directories(dir / "numpy");
-  REQUIRE(th::test::run_python("tests/python/check_synth.py", (dir / "data").string() +
-                                                                  " --resave " + (dir / "numpy").string()) == 0);
+  REQUIRE(th::test::run_python("tests/python/check_synth.py",
+                               (dir / "data").string() + " --resave " + (dir / "numpy").string()) ==
+          0);
   for (const char* human : {"CoreView_313", "CoreView_396", "CoreView_s03"}) {
     INFO(human);
     const auto ours = dir / "data" / human / "annots.npy";
     const auto numpy = dir / "numpy" / (std::string(human) + "_annots.npy");
     CHECK(th::io::read_npy_value(ours) == th::io::read_npy_value(numpy));
     CHECK(read_all(ours) == read_all(numpy));  // np.save of the dict numpy read: same bytes
-    const std::string params = std::string(human) == "CoreView_396" ? "params/0.npy"
+    const std::string params = std::string(human) == "CoreView_396"   ? "params/0.npy"
                                : std::string(human) == "CoreView_313" ? "new_params/1.npy"
-                                                                     : "new_params/0.npy";
+                                                                      : "new_params/0.npy";
     const auto p_numpy = dir / "numpy" / (std::string(human) + "_params.npy");
     CHECK(th::io::read_npy_value(dir / "data" / human / params) == th::io::read_npy_value(p_numpy));
     CHECK(read_all(dir / "data" / human / params) == read_all(p_numpy));
@@ -263,14 +273,19 @@ TEST_CASE("published vertices are the body model's LBS of the published (noisy) 
   generate(tiny({"noise.enabled=false"}), dir / "clean", false);
   const auto model = th::body::load_smpl(dir / "noisy" / "smpl_model.npz");
   for (int f = 0; f < 4; ++f) {
-    const auto noisy = th::io::read_npy_value(dir / "noisy" / "CoreView_s03" / "new_params" / (std::to_string(f) + ".npy"));
-    const auto clean = th::io::read_npy_value(dir / "clean" / "CoreView_s03" / "new_params" / (std::to_string(f) + ".npy"));
+    const auto noisy = th::io::read_npy_value(dir / "noisy" / "CoreView_s03" / "new_params" /
+                                              (std::to_string(f) + ".npy"));
+    const auto clean = th::io::read_npy_value(dir / "clean" / "CoreView_s03" / "new_params" /
+                                              (std::to_string(f) + ".npy"));
     const auto r = th::body::lbs(model, noisy["poses"].as_tensor(), noisy["shapes"].as_tensor());
-    const auto world = th::body::smpl_to_world(r.vertices, noisy["Rh"].as_tensor(), noisy["Th"].as_tensor());
-    const auto published = th::io::read_npy(dir / "noisy" / "CoreView_s03" / "new_vertices" / (std::to_string(f) + ".npy"));
+    const auto world =
+        th::body::smpl_to_world(r.vertices, noisy["Rh"].as_tensor(), noisy["Th"].as_tensor());
+    const auto published = th::io::read_npy(dir / "noisy" / "CoreView_s03" / "new_vertices" /
+                                            (std::to_string(f) + ".npy"));
     CHECK(torch::allclose(world.to(torch::kFloat32), published, 0, 1e-5));
     // The fitting error: poses differ by a few degrees, shapes are the same.
-    const double dp = (noisy["poses"].as_tensor() - clean["poses"].as_tensor()).abs().max().item<double>();
+    const double dp =
+        (noisy["poses"].as_tensor() - clean["poses"].as_tensor()).abs().max().item<double>();
     CHECK(dp > 0.01);
     CHECK(dp < 0.3);
     CHECK(torch::equal(noisy["shapes"].as_tensor(), clean["shapes"].as_tensor()));
@@ -278,7 +293,7 @@ TEST_CASE("published vertices are the body model's LBS of the published (noisy) 
   }
 }
 
-TEST_CASE("same seed gives byte-identical files whatever the threads; another seed other people",
+TEST_CASE("same seed gives byte-identical files whatever the threads and another seed other people",
           "[synth]") {
   const auto dir = th::test::scratch_dir("synth_determinism");
   generate(tiny({"threads=1"}), dir / "a", false);
@@ -294,13 +309,14 @@ TEST_CASE("same seed gives byte-identical files whatever the threads; another se
   // Another seed: other shapes, other images (the body model itself is shared).
   CHECK(c["smpl_model.npz"] == a["smpl_model.npz"]);
   const auto shapes = [&](const fs::path& root) {
-    return th::io::read_npy_value(root / "CoreView_s03" / "new_params" / "0.npy")["shapes"].as_tensor();
+    return th::io::read_npy_value(root / "CoreView_s03" / "new_params" / "0.npy")["shapes"]
+        .as_tensor();
   };
   CHECK(!torch::allclose(shapes(dir / "a"), shapes(dir / "c")));
   CHECK(a["CoreView_s03/Camera_B1/000000.jpg"] != c["CoreView_s03/Camera_B1/000000.jpg"]);
 }
 
-TEST_CASE("an existing folder: same config is skipped, another is refused unless forced",
+TEST_CASE("an existing folder with the same config is skipped and another is refused unless forced",
           "[synth]") {
   const auto dir = th::test::scratch_dir("synth_existing") / "data";
   const auto config = tiny({"frames=2", "split.train_frames=1"});
