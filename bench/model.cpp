@@ -16,6 +16,7 @@
 #include <iomanip>
 #include <iostream>
 #include <sstream>
+#include <thread>
 
 #include <c10/core/Allocator.h>
 #include <c10/util/ThreadLocalDebugInfo.h>
@@ -231,6 +232,8 @@ int main(int argc, char** argv) {
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
   cli.add_option("--out", out, "write the figures to this file (markdown)");
   cli.add_option("--chunks", chunks, "chunk sizes for the per-point figures");
+  int rounds = 3;
+  cli.add_option("--rounds", rounds, "rounds of per-point measurements (best of)");
   cli.add_flag("--quick", quick, "small image and fewer repetitions (smoke run)");
   int64_t train_chunk = RenderConfig{}.train_chunk_points, render_chunk = RenderConfig{}.chunk_points;
   cli.add_option("--train-chunk", train_chunk, "render.train_chunk_points for the training step");
@@ -257,6 +260,14 @@ int main(int argc, char** argv) {
          std::to_string(size) + ", 6890 body vertices, 300 tokens, default model (ViT depth 12), random weights.");
   const char* wait = std::getenv("OMP_WAIT_POLICY");
   r.line(std::string("OMP_WAIT_POLICY=") + (wait ? wait : "(unset: libgomp default, active spinning)") + ".");
+  auto loadavg = [] {
+    std::ifstream f("/proc/loadavg");
+    std::string a, b, c;
+    f >> a >> b >> c;
+    return a + " " + b + " " + c;
+  };
+  r.line("Machine: " + std::to_string(std::thread::hardware_concurrency()) +
+         " cores shared with other jobs; load average at start " + loadavg() + ".");
   r.line(std::string("Allocator: glibc malloc") + (system_malloc ? " (defaults)" : " with M_MMAP_MAX=0, no trimming") + ".");
   r.line("Memory: peak bytes of live LibTorch CPU tensors allocated in the measured section (c10 memory-reporting "
          "hook on the allocator); in brackets the resident-set growth (VmHWM after a reset via /proc/self/clear_refs "
@@ -316,6 +327,10 @@ int main(int argc, char** argv) {
         v = v.detach().requires_grad_(true);
         if (model::FrameCache::gathered(k)) cache_g.grad_sinks[k] = torch::zeros_like(v);
       }
+    // Rounds over all chunk sizes; each cell keeps its best round (the machine is shared).
+    struct Cell { double fwd = 0, dfirst = 0, fb = 0, train = 0, mem = 0; render::Profile profile; double fwd_s = 0; };
+    std::map<int64_t, Cell> best;
+    for (int round = 0; round < rounds; ++round)
     for (const int64_t chunk : chunks) {
       if (chunk > pts.size(0)) continue;
       auto rate = [&](auto&& fn) {
@@ -338,8 +353,7 @@ int main(int argc, char** argv) {
         fwd = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward(cache_ng, p, d); });
         const double fwd_seconds = seconds_since(t_fwd);
         net->set_profile(nullptr);
-        stage_lines.push_back("chunk " + std::to_string(chunk) + ":");
-        shares_into(stage_lines.back(), fwd_profile, fwd_seconds);
+        if (fwd > best[chunk].fwd) best[chunk].profile = fwd_profile, best[chunk].fwd_s = fwd_seconds;
         dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward_density_first(cache_ng, p, d); });
       }
       fb = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
@@ -363,11 +377,22 @@ int main(int argc, char** argv) {
       train = reps * pts.size(0) / seconds_since(t0);
       const double train_mem = mem.tensor_mib();
       net->zero_grad();
-      r.line("| " + std::to_string(chunk) + " | " + fmt(fwd, 0) + " | " + fmt(dfirst, 0) + " | " + fmt(fb, 0) + " | " +
-             fmt(train, 0) + " | " + fmt(train_mem, 0) + " |");
+      auto& c = best[chunk];
+      c.fwd = std::max(c.fwd, fwd), c.dfirst = std::max(c.dfirst, dfirst), c.fb = std::max(c.fb, fb);
+      c.train = std::max(c.train, train), c.mem = std::max(c.mem, train_mem);
+      std::cout << "  round " << round << " chunk " << chunk << ": " << fmt(fwd, 0) << " " << fmt(dfirst, 0) << " "
+                << fmt(fb, 0) << " " << fmt(train, 0) << std::endl;
+    }
+    for (auto& [chunk, c] : best) {
+      r.line("| " + std::to_string(chunk) + " | " + fmt(c.fwd, 0) + " | " + fmt(c.dfirst, 0) + " | " + fmt(c.fb, 0) + " | " +
+             fmt(c.train, 0) + " | " + fmt(c.mem, 0) + " |");
+      stage_lines.push_back("chunk " + std::to_string(chunk) + ":");
+      shares_into(stage_lines.back(), c.profile, c.fwd_s);
     }
     r.line("");
-    r.line("");
+    r.line("Best of " + std::to_string(rounds) + " rounds over all chunk sizes (points/s). For comparison, the reference "
+           "implementation on this machine (SPEC 9): 6,200 forward at its inference chunk of 32,768 points, 2,070 "
+           "forward+backward at its training batch of 153,600; 19,900 and 5,100 at its best chunk (~9,600).");
     r.line("Forward: full colour for every point. Density-first: colour only where sigma > 0 (about half here).");
     r.line("Forward time per stage:");
     for (const auto& l : stage_lines) r.line("- " + l);
@@ -407,11 +432,15 @@ int main(int argc, char** argv) {
       step(nullptr, false);  // warm-up
       render::Profile prof;
       PeakMemory mem;
-      const auto t0 = Clock::now();
-      const int reps = quick ? 1 : 2;
-      for (int i = 0; i < reps; ++i) step(&prof, false);
-      const double sec = seconds_since(t0) / reps;
-      for (auto& [k, v] : prof.seconds) v /= reps;
+      const int reps = quick ? 1 : 3;
+      double sec = 1e30;
+      for (int i = 0; i < reps; ++i) {  // best of reps (shared machine)
+        render::Profile p;
+        const auto t0 = Clock::now();
+        step(&p, false);
+        const double s = seconds_since(t0);
+        if (s < sec) sec = s, prof = p;
+      }
       // The same step skipping samples farther than 0.1 m from the body (train.skip_far_points,
       // SPEC 9; off by default for parity).
       const auto t1 = Clock::now();
@@ -423,7 +452,7 @@ int main(int argc, char** argv) {
         const auto params = net->parameters();
         for (size_t i = 0; i < params.size(); ++i) params[i].copy_(snapshot[i]);
       }
-      r.line("Training step (" + std::to_string(rays.size()) + " rays x " + std::to_string(samples) +
+      r.line("Training step, best of " + std::to_string(reps) + " (" + std::to_string(rays.size()) + " rays x " + std::to_string(samples) +
              " samples = " + std::to_string(rays.size() * samples) + " points, chunk " +
              std::to_string(rcs.train_chunk_points) + ", checkpointed): " + fmt(sec, 2) + " s, peak memory " +
              mem.text() + ", " + fmt(rays.size() * samples / sec, 0) + " points/s end to end");
@@ -457,6 +486,7 @@ int main(int argc, char** argv) {
       r.line("");
     }
   }
+  r.line("Load average at the end: " + loadavg() + ".");
   if (!out.empty()) {
     std::ofstream f(out);
     f << r.md.str();

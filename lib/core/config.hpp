@@ -108,9 +108,9 @@ struct RenderConfig {
   int samples = 64;              // per ray (16: the paper's fast variant)
   bool progressive = true;       // inference: distance culling, colour only where sigma > 0
   double cull_distance = 0.1;    // metres from the nearest body vertex
-  int64_t chunk_points = 8192;   // per-point work in chunks of this many points (measured best, bench/results/model.md)
+  int64_t chunk_points = 4096;  // per-point work in chunks of this many points (bench/results/model.md)
   // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
-  int64_t train_chunk_points = 8192;
+  int64_t train_chunk_points = 4096;
 };
 
 // ---- training (SPEC 5) -------------------------------------------------------------------

@@ -29,7 +29,7 @@ class HumanRepresentation : public torch::nn::Module {
 // TransHE + DPaRF + fc_0 (reference names: ViT.*, fc_0.*).
 class TokenFieldsImpl : public HumanRepresentation {
  public:
-  TokenFieldsImpl(const ModelConfig& config);
+  explicit TokenFieldsImpl(const ModelConfig& config);
 
   void prepare(const FrameInputs& in, const torch::Tensor& painted, const torch::Tensor& xs_vertices,
                FrameCache& cache) override;

@@ -310,9 +310,7 @@ render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCach
                                           const render::Rays& rays, const RenderConfig& config,
                                           bool skip_far_points, render::Profile* profile) {
   FrameField field(model, cache, config.train_chunk_points, true);
-  auto all = config;  // one renderer batch: the field chunks (and checkpoints) internally
-  all.chunk_points = std::max<int64_t>(config.chunk_points, rays.size() * config.samples);
-  return render::VolumeRenderer(all, profile).render(field, rays, true, skip_far_points ? cache.body.get() : nullptr);
+  return render::VolumeRenderer(config, profile).render(field, rays, true, skip_far_points ? cache.body.get() : nullptr);
 }
 
 render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,

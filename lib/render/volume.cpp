@@ -61,7 +61,11 @@ VolumeRenderer::VolumeRenderer(const RenderConfig& config, Profile* profile)
 RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool stratified,
                                     const BodyDistance* cull) const {
   const int64_t S = config_.samples, R = rays.size();
-  const int64_t batch = std::max<int64_t>(1, config_.chunk_points / S);
+  // Without autograd, ray batches of chunk_points samples bound the memory. With autograd the
+  // field bounds it (FrameField recomputes its chunks in the backward pass) and one call for all
+  // rays lets it build its per-frame gradient buffers once.
+  const int64_t batch = torch::GradMode::is_enabled() ? std::max<int64_t>(R, 1)
+                                                      : std::max<int64_t>(1, config_.chunk_points / S);
   std::vector<torch::Tensor> rgb, depth, acc;
   RenderResult out;
   out.stats.rays = R;

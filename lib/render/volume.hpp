@@ -101,8 +101,9 @@ struct RenderResult {
   RenderStats stats;
 };
 
-// Renders every sample of every ray (training, and full rendering at inference). The field is
-// called on chunks of at most config.chunk_points points. With `cull` (training with
+// Renders every sample of every ray (training, and full rendering at inference). Without
+// autograd the field is called on batches of at most config.chunk_points points; under autograd
+// once for all rays (the field chunks internally, see model::FrameField). With `cull` (training with
 // train.skip_far_points), samples farther than the culling distance from the body are skipped
 // (raw = 0), as at inference.
 class VolumeRenderer {

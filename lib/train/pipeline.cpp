@@ -46,7 +46,8 @@ Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
                        bool cull_in_training, render::Profile* profile) {
   Rendered out;
   out.cache = model.prepare(inputs);
-  model::FrameField field(model, out.cache, rc.chunk_points, /*checkpoint=*/training);
+  model::FrameField field(model, out.cache, training ? rc.train_chunk_points : rc.chunk_points,
+                          /*checkpoint=*/training);
   if (training) {
     render::VolumeRenderer renderer(rc, profile);
     out.result = renderer.render(field, rays, /*stratified=*/true,
