@@ -25,8 +25,9 @@ th::DataConfig tiny_config(const fs::path& root) {
 }
 
 std::shared_ptr<const Dataset> open(const fs::path& root, const std::string& setting,
-                                    Dataset::Mode mode = Dataset::Mode::Test) {
-  const auto c = tiny_config(root);
+                                    Dataset::Mode mode = Dataset::Mode::Test, double ratio = 0.5) {
+  auto c = tiny_config(root);
+  c.ratio = ratio;
   return std::make_shared<const Dataset>(c, setting, mode, load_body_model(c));
 }
 
@@ -85,11 +86,12 @@ TEST_CASE("test samples render every in-box pixel of the target view", "[dataset
 TEST_CASE("visible body vertices project inside the person's mask", "[dataset][visibility]") {
   // Exact fits (no fitting noise): the body lies inside the clothed silhouette; where skin is
   // the surface, silhouette vertices sit on the mask's edge, hence the 1-pixel tolerance.
-  const auto ds = open(th::test::tiny_dataset(/*exact=*/true), "identity");
+  // Full resolution of the tiny data (128 px): at 64 px an arm is two pixels wide.
+  const auto ds = open(th::test::tiny_dataset(/*exact=*/true), "identity", Dataset::Mode::Test, 1.0);
   const auto& human = *ds->humans()[0];
   const Sample s = ds->load(0, 0);
   for (size_t v = 0; v < s.reference_views.size(); ++v) {
-    const ViewImage view = load_view(human, s.frame, s.reference_views[v], {0.5, false, nullptr});
+    const ViewImage view = load_view(human, s.frame, s.reference_views[v], {1.0, false, nullptr});
     const auto vis = s.visibility[v];
     const auto uv = th::geometry::project_points(s.body.vertices.index({vis}), s.ref_K[v], s.ref_R[v], s.ref_T[v]);
     const auto px = torch::round(uv).to(torch::kInt64);
