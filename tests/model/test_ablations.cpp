@@ -22,8 +22,8 @@ torch::Tensor grid_labels(const torch::Tensor& points, double cell) {
 
 struct Ablation {
   std::string name;
-  std::function<void(ModelConfig&, RenderConfig&)> configure;
-  std::function<void(model::FrameInputs&)> labels;  // optional relabelling
+  std::function<void(ModelConfig&, RenderConfig&)> configure = nullptr;
+  std::function<void(model::FrameInputs&)> labels = nullptr;  // optional relabelling
   int64_t vertices = 300, tokens = 24;
   bool skip_far_points = false;
 };
