@@ -120,12 +120,7 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
 
   torch::manual_seed(uint64_t(config.seed));
   model::TransHuman model(config.model, config.render.cull_distance);
-  if (!config.model.encoder.pretrained.empty()) {
-    model::load_pretrained_encoder(*model->encoder, config.model.encoder.pretrained);
-    spdlog::info("encoder: ImageNet weights from {}", config.model.encoder.pretrained);
-  } else {
-    spdlog::info("encoder: random initialisation (no model.encoder.pretrained)");
-  }
+  // The constructor loads model.encoder.pretrained (and logs either way).
   model->to(device);
   torch::optim::Adam optim(model->parameters(), torch::optim::AdamOptions(tc.lr)
                                                     .betas({tc.beta1, tc.beta2})
