@@ -75,6 +75,14 @@ void validate_section(const TrainConfig& c, const std::string& path) {
           c.warmup_epochs, "must be in [0, epochs)");
   require(c.grad_clip > 0, path, "grad_clip", c.grad_clip, "must be positive");
   require(c.lpips_weight >= 0, path, "lpips_weight", c.lpips_weight, "must be >= 0");
+  require(c.save_every_epochs >= 0, path, "save_every_epochs", c.save_every_epochs,
+          "must be >= 0 (0: only at the end)");
+  require(c.val_every_epochs >= 0, path, "val_every_epochs", c.val_every_epochs,
+          "must be >= 0 (0: only at the end)");
+  require(c.log_every_steps > 0, path, "log_every_steps", c.log_every_steps, "must be positive");
+  require(c.max_minutes >= 0, path, "max_minutes", c.max_minutes, "must be >= 0 (0: no limit)");
+  require(c.dist_timeout_s > 0, path, "dist_timeout_s", c.dist_timeout_s, "must be positive");
+  require(c.dist_bucket_mb > 0, path, "dist_bucket_mb", c.dist_bucket_mb, "must be positive");
 }
 
 }  // namespace th

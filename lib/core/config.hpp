@@ -127,11 +127,16 @@ struct TrainConfig {
   double lpips_weight = 0.1;
   std::string lpips_weights = "";   // file from scripts/export_lpips.py; empty: term off
   bool skip_far_points = false;     // cull points > cull_distance from the body in training too
-  int save_every_epochs = 10;
-  int val_every_epochs = 10;
+  int save_every_epochs = 10;       // 0: only the final checkpoint (latest.pt is always written)
+  int val_every_epochs = 10;        // 0: validate only after the last epoch
   int val_views = 2;
   int log_every_steps = 10;
   double max_minutes = 0;           // stop (with a checkpoint) after this wall time; 0: no limit
+  // Data-parallel training (several ranks, lib/dist): c10d backend, how long a rank waits for
+  // the others before it gives up with an error, and the size of the gradient all-reduce buckets.
+  std::string dist_backend = "auto";  // auto (nccl on CUDA when built in, else gloo) | gloo | nccl
+  double dist_timeout_s = 300;
+  double dist_bucket_mb = 25;
 };
 
 // ---- evaluation (SPEC 6) -----------------------------------------------------------------
@@ -256,6 +261,9 @@ template <class V> void visit_fields(V& v, TrainConfig& c) {
   v("val_views", c.val_views);
   v("log_every_steps", c.log_every_steps);
   v("max_minutes", c.max_minutes);
+  v.choice("dist_backend", c.dist_backend, {"auto", "gloo", "nccl"});
+  v("dist_timeout_s", c.dist_timeout_s);
+  v("dist_bucket_mb", c.dist_bucket_mb);
 }
 template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("setting", c.setting);

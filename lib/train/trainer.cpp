@@ -247,8 +247,9 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
       st.epoch = epoch + 1;
       st.iteration = 0;
       const bool last = st.epoch == tc.epochs;
-      if (st.epoch % tc.save_every_epochs == 0 || last) checkpoint(st, true);
-      if (val_set && (st.epoch % tc.val_every_epochs == 0 || last))
+      const auto due = [&](int every) { return last || (every > 0 && st.epoch % every == 0); };
+      if (due(tc.save_every_epochs)) checkpoint(st, true);
+      if (val_set && due(tc.val_every_epochs))
       {
         summary.last_val_psnr = validate(*model, config, *val_set, tokens, canonical, device,
                                          val_dir, st.epoch, metrics_log, st.step);

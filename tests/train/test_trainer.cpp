@@ -92,6 +92,20 @@ TEST_CASE("the run directory holds metrics, checkpoints, validation images and t
     CHECK(e.path().extension() != ".tmp");
 }
 
+TEST_CASE("checkpoint and validation intervals of 0 mean: only after the last epoch", "[train]") {
+  const auto c = tiny_config({"train.save_every_epochs=0", "train.val_every_epochs=0"});
+  const fs::path run = th::test::scratch_dir("train_every_zero");
+  const auto s = th::train::train(c, torch::kCPU, {run, false, -1});
+  CHECK(s.steps == 6);
+  CHECK(fs::exists(run / "checkpoints" / "latest.pt"));
+  CHECK(fs::exists(run / "checkpoints" / "epoch_0002.pt"));  // the last epoch
+  CHECK_FALSE(fs::exists(run / "checkpoints" / "epoch_0001.pt"));
+  CHECK(fs::exists(run / "val" / "epoch_0002_0.png"));
+  CHECK_FALSE(fs::exists(run / "val" / "epoch_0001_0.png"));
+  CHECK_THROWS_WITH(tiny_config({"train.val_every_epochs=-1"}),
+                    Catch::Contains("train.val_every_epochs"));
+}
+
 TEST_CASE("a NaN loss stops the run naming the step and the last good checkpoint", "[train]") {
   // An absurd learning rate overflows the weights after the first update.
   const auto c = tiny_config({"train.lr=1e30", "train.warmup_epochs=0", "train.val_views=0"});
