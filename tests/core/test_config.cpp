@@ -1,6 +1,8 @@
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <fstream>
+#include <sstream>
 
 #include "core/config.hpp"
 #include "support/test_env.hpp"
@@ -126,4 +128,39 @@ TEST_CASE("the resolved config written to disk loads back to the same values", "
   CHECK(YAML::Dump(to_tree(back)) == YAML::Dump(to_tree(c)));
   CHECK(back.train.lr == Approx(0.123));
   CHECK_FALSE(back.model.fdi.raw_rgb);
+}
+
+TEST_CASE("every ablation row loads, validates and changes what its comment says", "[config][ablations]") {
+  const YAML::Node full = to_tree(load<Config>("configs/ablations/full.yaml"));
+  std::vector<std::string> full_keys;
+  collect_keys(full, "", full_keys);
+  int rows = 0;
+  for (const auto& entry : fs::directory_iterator("configs/ablations")) {
+    const std::string name = entry.path().stem().string();
+    if (name.front() == '_' || name == "full") continue;
+    INFO("configs/ablations/" << name << ".yaml");
+    const YAML::Node row = to_tree(load<Config>(entry.path()));
+    // The keys whose values differ from the full model's: what the row ablates.
+    std::vector<std::string> changed;
+    for (const auto& key : full_keys) {
+      YAML::Node a = YAML::Clone(full), b = YAML::Clone(row);
+      std::stringstream path(key);
+      std::string part;
+      while (std::getline(path, part, '.')) {
+        a.reset(a[part]);
+        b.reset(b[part]);
+      }
+      if (YAML::Dump(a) != YAML::Dump(b)) changed.push_back(key);
+    }
+    // The row's own file names exactly the changed keys (besides `parent`).
+    std::vector<std::string> own;
+    collect_keys(YAML::LoadFile(entry.path().string()), "", own);
+    own.erase(std::remove(own.begin(), own.end(), "parent"), own.end());
+    std::sort(own.begin(), own.end());
+    std::sort(changed.begin(), changed.end());
+    if (name == "samples_16") CHECK(changed.empty());  // the demo base renders 16 samples already
+    else CHECK(changed == own);
+    ++rows;
+  }
+  CHECK(rows >= 18);
 }

@@ -217,13 +217,9 @@ TEST_CASE(
     "the masks and cameras lie on the ring",
     "[synth][python]") {
   const auto dir = th::test::scratch_dir("synth_geometry");
-  const auto start = std::chrono::steady_clock::now();
   const Summary s = generate(tiny({"noise.enabled=false"}), dir / "data", false);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   CHECK(s.people == 3);
   CHECK(s.images == 4 * (21 + 23 + 23));
-  CHECK(seconds < 30.0);  // "in seconds": about 3 s on an idle 2-core machine
   // Structure at the tiny size; mask geometry at 256 x 256, where limbs are several pixels
   // wide (at 128 x 128 an arm is 4 px and its rim vertices are half of it).
   CHECK(th::test::run_python("tests/python/check_synth.py",
