@@ -27,6 +27,7 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
 RunContext start_run(const CommonOptions& o, const std::string& app_name,
                      const std::string& default_out) {
   logging::init_console(o.verbose);
+  if (o.quiet) spdlog::set_level(spdlog::level::err);
 
   std::vector<std::string> overrides = o.overrides;
   if (!o.device.empty()) overrides.push_back("device=" + o.device);

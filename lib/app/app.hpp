@@ -22,6 +22,7 @@ struct CommonOptions {
   int threads = -1;                    // overrides config `threads` when >= 0
   bool dry_run = false;
   bool verbose = false;
+  bool quiet = false;                  // errors only on the console (data-parallel ranks other than 0)
 };
 
 // Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional

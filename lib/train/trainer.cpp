@@ -6,16 +6,22 @@
 
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <numeric>
+#include <optional>
 #include <random>
+#include <sstream>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/progress.hpp"
 #include "data/dataset.hpp"
+#include "data/sampler.hpp"
+#include "dist/communicator.hpp"
 #include "metrics/lpips.hpp"
 #include "metrics/metrics.hpp"
 #include "model/checkpoint_import.hpp"
+#include "model/encoder.hpp"
 #include "train/images.hpp"
 #include "train/jsonl.hpp"
 #include "train/pipeline.hpp"
@@ -28,19 +34,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// SplitMix64: decorrelated seeds for (run seed, epoch, iteration) and per step.
-uint64_t mix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-
-// Writes `path` atomically: the archive goes to a temporary file renamed over the target, so a
-// checkpoint is never half-written.
-void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::optim::Adam& optim,
-                     const CheckpointState& st) {
-  torch::serialize::OutputArchive root, m, o;
+// The checkpoint archive: model weights and buffers, optimiser state and the run's position.
+void write_checkpoint(torch::serialize::OutputArchive& root, model::TransHumanImpl& model,
+                      torch::optim::Adam& optim, const CheckpointState& st) {
+  torch::serialize::OutputArchive m, o;
   model.save(m);
   optim.save(o);
   root.write("model", m);
@@ -48,6 +45,28 @@ void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::
   root.write("epoch", torch::tensor(int64_t(st.epoch)));
   root.write("step", torch::tensor(st.step));
   root.write("iteration", torch::tensor(int64_t(st.iteration)));
+}
+
+CheckpointState read_checkpoint(torch::serialize::InputArchive& root, model::TransHumanImpl& model,
+                                torch::optim::Adam& optim) {
+  torch::serialize::InputArchive m, o;
+  root.read("model", m);
+  root.read("optimizer", o);
+  model.load(m);
+  optim.load(o);
+  torch::Tensor epoch, step, iteration;
+  root.read("epoch", epoch);
+  root.read("step", step);
+  root.read("iteration", iteration);
+  return {int(epoch.item<int64_t>()), step.item<int64_t>(), int(iteration.item<int64_t>())};
+}
+
+// Writes `path` atomically: the archive goes to a temporary file renamed over the target, so a
+// checkpoint is never half-written.
+void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::optim::Adam& optim,
+                     const CheckpointState& st) {
+  torch::serialize::OutputArchive root;
+  write_checkpoint(root, model, optim, st);
   const fs::path tmp = path.string() + ".tmp";
   try {
     root.save_to(tmp.string());
@@ -60,21 +79,44 @@ void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::
 CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,
                                 torch::optim::Adam& optim) {
   if (!fs::exists(path)) fail("cannot resume: '", path.string(), "' does not exist");
-  torch::serialize::InputArchive root, m, o;
+  torch::serialize::InputArchive root;
   try {
     root.load_from(path.string());
-    root.read("model", m);
-    root.read("optimizer", o);
+    return read_checkpoint(root, model, optim);
   } catch (const c10::Error& e) {
     fail("checkpoint '", path.string(), "' cannot be read: ", e.what_without_backtrace());
   }
-  model.load(m);
-  optim.load(o);
-  torch::Tensor epoch, step, iteration;
-  root.read("epoch", epoch);
-  root.read("step", step);
-  root.read("iteration", iteration);
-  return {int(epoch.item<int64_t>()), step.item<int64_t>(), int(iteration.item<int64_t>())};
+}
+
+// Data parallelism: every rank starts from rank 0's state (fresh or resumed), sent as the bytes of
+// a checkpoint, so no rank needs the run directory.
+CheckpointState broadcast_state(dist::Communicator& comm, model::TransHumanImpl& model,
+                                torch::optim::Adam& optim, const CheckpointState& st) {
+  std::string bytes;
+  if (comm.rank() == 0) {
+    std::ostringstream out;
+    torch::serialize::OutputArchive root;
+    write_checkpoint(root, model, optim, st);
+    root.save_to(out);
+    bytes = out.str();
+  }
+  comm.broadcast(bytes, "rank 0's weights and optimiser state");
+  if (comm.rank() == 0) return st;
+  torch::serialize::InputArchive root;
+  root.load_from(bytes.data(), bytes.size());
+  return read_checkpoint(root, model, optim);
+}
+
+// BatchNorm running statistics: averaged over the ranks after each step so every rank holds the
+// same buffers (the batch statistics used in training are per sample, SPEC 3.1).
+std::vector<torch::Tensor> batchnorm_statistics(torch::nn::Module& net) {
+  std::vector<torch::Tensor> out;
+  for (const auto& m : net.modules(/*include_self=*/false))
+    if (auto* bn = dynamic_cast<model::BatchNormImpl*>(m.get())) {
+      out.push_back(bn->running_mean);
+      out.push_back(bn->running_var);
+    }
+  return out;
 }
 
 void set_lr(torch::optim::Adam& optim, double lr) {
@@ -104,17 +146,33 @@ void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint) {
 
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options) {
   const auto& tc = config.train;
+  dist::Communicator* comm = options.comm.get();
+  TORCH_CHECK(options.virtual_ranks >= 1, "train: virtual_ranks must be >= 1");
+  // Data parallelism: `world` samples per step, one per (virtual) rank; this process computes
+  // the samples of `ranks` and rank 0 alone writes into the run directory.
+  const int procs = comm ? comm->world_size() : 1, proc = comm ? comm->rank() : 0;
+  const int per_process = options.virtual_ranks, world = procs * per_process;
+  const bool lead = proc == 0;
+  std::vector<int> ranks(static_cast<size_t>(per_process));
+  std::iota(ranks.begin(), ranks.end(), proc * per_process);
+  auto on_lead = [&](const std::function<void()>& fn, const std::string& what) {
+    if (comm) comm->on_lead(fn, what);
+    else fn();
+  };
+
   const fs::path run = options.run_dir;
   const fs::path ckpt_dir = run / "checkpoints", val_dir = run / "val";
-  fs::create_directories(ckpt_dir);
-  fs::create_directories(val_dir);
+  if (lead) {
+    fs::create_directories(ckpt_dir);
+    fs::create_directories(val_dir);
+  }
 
   const auto smpl = data::load_body_model(config.data);
   const auto train_set = std::make_shared<const data::Dataset>(
       config.data, config.data.train_setting, data::Dataset::Mode::Train, smpl);
   if (train_set->size() == 0) fail("training setting '", config.data.train_setting, "' has no samples");
   std::shared_ptr<const data::Dataset> val_set;
-  if (tc.val_views > 0)
+  if (tc.val_views > 0 && lead)
     val_set = std::make_shared<const data::Dataset>(config.data, config.data.test_setting,
                                                     data::Dataset::Mode::Test, smpl);
 
@@ -133,16 +191,24 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
 
   CheckpointState st;
   fs::path last_ckpt;
-  if (options.resume) {
+  if (options.resume && lead) {
     last_ckpt = ckpt_dir / "latest.pt";
     st = load_checkpoint(last_ckpt, *model, optim);
     spdlog::info("resumed from {} at epoch {}, step {}", last_ckpt.string(), st.epoch, st.step);
   }
+  const auto bn_stats = batchnorm_statistics(*model);
+  if (comm) {
+    st = broadcast_state(*comm, *model, optim, st);
+    spdlog::info("data-parallel training: {} ranks, global batch {} ({} backend)", procs, world,
+                 comm->backend());
+  }
 
-  JsonlWriter metrics_log(run / "metrics.jsonl");
+  std::optional<JsonlWriter> metrics_log;
+  if (lead) metrics_log.emplace(run / "metrics.jsonl");
   const int64_t total_steps = int64_t(tc.epochs) * tc.iters_per_epoch;
   const int64_t stop_step = options.max_steps >= 0 ? std::min(options.max_steps, total_steps) : total_steps;
-  Progress progress("train", stop_step - st.step, "step");
+  std::optional<Progress> progress;
+  if (lead) progress.emplace("train", stop_step - st.step, "step");
   const auto started = std::chrono::steady_clock::now();
   auto minutes = [&] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() / 60.0;
@@ -156,91 +222,138 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
       fs::copy_file(last_ckpt, ckpt_dir / name, fs::copy_options::overwrite_existing);
     }
   };
+  auto finish = [&](TrainSummary& summary, int epoch) {
+    if (!options.rank_state_dir.empty()) {
+      fs::create_directories(options.rank_state_dir);
+      for (int r : ranks)  // one file per rank this process played (identical for virtual ranks)
+        save_checkpoint(options.rank_state_dir / ("rank" + std::to_string(r) + ".pt"), *model, optim, st);
+    }
+    if (comm) comm->barrier("the end of training");
+    summary.steps = st.step;
+    summary.epoch = epoch;
+    summary.checkpoint = last_ckpt;
+  };
 
   TrainSummary summary;
-  double loss_sum = 0, psnr_sum = 0, time_sum = 0;
+  double loss_sum = 0, psnr_sum = 0, time_sum = 0, allreduce_sum = 0;
   int64_t rays_sum = 0, logged = 0;
   const int P = config.data.patch.count, S = config.data.patch.size;
+  const data::ShardedSampler sampler(train_set->size(), uint64_t(config.seed), world);
 
   for (int epoch = st.epoch; epoch < tc.epochs && st.step < stop_step; ++epoch) {
     const double lr = learning_rate(tc, epoch);
     set_lr(optim, lr);
-    // This epoch's samples: a seeded permutation of the dataset (cycled if shorter).
-    std::mt19937_64 erng(mix(uint64_t(config.seed) ^ mix(uint64_t(epoch))));
-    std::vector<size_t> perm(train_set->size());
-    std::iota(perm.begin(), perm.end(), 0);
-    std::shuffle(perm.begin(), perm.end(), erng);
-    std::vector<size_t> order;
-    std::vector<uint64_t> seeds;
-    for (int it = st.iteration; it < tc.iters_per_epoch; ++it) {
-      order.push_back(perm[size_t(it) % perm.size()]);
-      seeds.push_back(mix(uint64_t(config.seed) * 1000003ull + uint64_t(epoch) * 7919ull + uint64_t(it)));
-    }
-    data::Prefetcher loader(train_set, order, seeds, config.data.workers, config.data.prefetch);
+    // This epoch's samples for this process's ranks (seeded permutation, cycled if shorter).
+    auto draw = sampler.draw(epoch, st.iteration, tc.iters_per_epoch, ranks);
+    data::Prefetcher loader(train_set, std::move(draw.order), std::move(draw.seeds),
+                            config.data.workers, config.data.prefetch);
 
     for (int it = st.iteration; it < tc.iters_per_epoch && st.step < stop_step; ++it) {
       const auto t0 = std::chrono::steady_clock::now();
-      const data::Sample sample = loader.next();
-      torch::manual_seed(mix(uint64_t(config.seed) + uint64_t(st.step)));  // stratified jitter
-      model->train();
-      const auto inputs = frame_inputs(sample, canonical, tokens.labels(sample.body), device);
-      const auto rays = sample_rays(sample, device);
-      const auto rendered = render_sample(*model, config.render, inputs, rays, true, tc.skip_far_points);
-      const auto& rgb = rendered.result.rgb;
-
-      // Patches: rendered colours in their slots, black where no ray was rendered (SPEC 5).
-      auto canvas = torch::zeros({int64_t(P) * S * S, 3}, rgb.options());
-      canvas.index_put_({sample.ray_patch_index.to(device)}, rgb);
-      canvas = canvas.reshape({P, S, S, 3}).permute({0, 3, 1, 2});
-      const auto target = sample.patch_rgb.to(device);
-      const auto mse = torch::mse_loss(canvas, target);
-      torch::Tensor loss = mse, perceptual;
-      if (lpips) {
-        perceptual = lpips->forward(canvas * 2 - 1, target * 2 - 1).mean();
-        loss = loss + tc.lpips_weight * perceptual;
-      }
-      const double loss_value = loss.item<double>();
-      if (!std::isfinite(loss_value))
-        fail("the loss became ", loss_value, " at step ", st.step, " (epoch ", epoch, "); last good checkpoint: ",
-             last_ckpt.empty() ? std::string("none yet") : last_ckpt.string(),
-             " (try a lower train.lr or check the data of sample '", sample.human, "' frame ", sample.frame, ")");
+      // Sums over this process's samples (over all ranks after the reduction below).
+      double step_loss = 0, step_mse = 0, step_lpips = 0, step_psnr = 0, step_rays = 0;
+      std::string bad_loss;  // the error of a non-finite loss on this process
       optim.zero_grad();
-      loss.backward();
+      for (int j = 0; j < per_process; ++j) {
+        const data::Sample sample = loader.next();
+        // Stratified jitter, per sample of the global batch (with one rank: per step).
+        torch::manual_seed(data::mix_seed(uint64_t(config.seed) + uint64_t(st.step) * uint64_t(world) +
+                                          uint64_t(ranks[size_t(j)])));
+        model->train();
+        const auto inputs = frame_inputs(sample, canonical, tokens.labels(sample.body), device);
+        const auto rays = sample_rays(sample, device);
+        const auto rendered = render_sample(*model, config.render, inputs, rays, true, tc.skip_far_points);
+        const auto& rgb = rendered.result.rgb;
+
+        // Patches: rendered colours in their slots, black where no ray was rendered (SPEC 5).
+        auto canvas = torch::zeros({int64_t(P) * S * S, 3}, rgb.options());
+        canvas.index_put_({sample.ray_patch_index.to(device)}, rgb);
+        canvas = canvas.reshape({P, S, S, 3}).permute({0, 3, 1, 2});
+        const auto target = sample.patch_rgb.to(device);
+        const auto mse = torch::mse_loss(canvas, target);
+        torch::Tensor loss = mse, perceptual;
+        if (lpips) {
+          perceptual = lpips->forward(canvas * 2 - 1, target * 2 - 1).mean();
+          loss = loss + tc.lpips_weight * perceptual;
+        }
+        const double loss_value = loss.item<double>();
+        if (!std::isfinite(loss_value)) {
+          std::ostringstream msg;
+          msg << "the loss became " << loss_value << " at step " << st.step << " (epoch " << epoch
+              << (comm ? ", rank " + std::to_string(proc) : std::string()) << "); last good checkpoint: "
+              << (last_ckpt.empty() ? std::string("none yet") : last_ckpt.string())
+              << " (try a lower train.lr or check the data of sample '" << sample.human << "' frame "
+              << sample.frame << ")";
+          if (!comm) fail(msg.str());
+          bad_loss = msg.str();  // the other ranks must learn of it before anyone steps
+        } else {
+          loss.backward();
+        }
+        step_loss += loss_value;
+        step_mse += mse.item<double>();
+        step_lpips += perceptual.defined() ? perceptual.item<double>() : NAN;
+        step_psnr += metrics::psnr(rgb.detach().cpu(), sample.ray_rgb);
+        step_rays += double(rays.size());
+      }
+      if (comm) {
+        // One small reduction: the step's statistics and whether any rank saw a non-finite loss.
+        const auto sums = comm->sum({step_loss, step_mse, step_lpips, step_psnr, step_rays,
+                                     bad_loss.empty() ? 0.0 : 1.0}, "the step statistics");
+        if (!bad_loss.empty()) fail(bad_loss);
+        if (sums[5] > 0)
+          fail("the loss became non-finite on ", int(sums[5]), " other rank(s) at step ", st.step,
+               " (epoch ", epoch, "); see their error; last good checkpoint: ",
+               last_ckpt.empty() ? std::string("none yet") : last_ckpt.string());
+        step_loss = sums[0], step_mse = sums[1], step_lpips = sums[2], step_psnr = sums[3], step_rays = sums[4];
+        comm->average_gradients(model->parameters(), world);
+      } else if (per_process > 1) {
+        for (auto& p : model->parameters())
+          if (p.grad().defined()) p.mutable_grad().div_(per_process);
+      }
       torch::nn::utils::clip_grad_value_(model->parameters(), tc.grad_clip);
       optim.step();
+      if (comm) comm->average(bn_stats, "the BatchNorm statistics");
 
       ++st.step;
       st.iteration = it + 1;
       st.epoch = epoch;
       const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      const double batch_psnr =
-          metrics::psnr(rgb.detach().cpu(), sample.ray_rgb);
-      loss_sum += loss_value, psnr_sum += batch_psnr, time_sum += seconds;
-      rays_sum += rays.size(), ++logged;
+      const double loss_value = step_loss / world;
+      loss_sum += loss_value, psnr_sum += step_psnr / world, time_sum += seconds;
+      rays_sum += int64_t(step_rays), ++logged;
+      if (comm) allreduce_sum += comm->allreduce_seconds_last();
       summary.last_loss = loss_value;
-      if (st.step % tc.log_every_steps == 0 || st.step == stop_step) {
+      if (lead && (st.step % tc.log_every_steps == 0 || st.step == stop_step)) {
         JsonLine line;
         line.add("step", st.step).add("epoch", epoch).add("lr", lr).add("loss", loss_sum / logged)
-            .add("mse", mse.item<double>())
-            .add("lpips", perceptual.defined() ? perceptual.item<double>() : NAN)
+            .add("mse", step_mse / world)
+            .add("lpips", lpips ? step_lpips / world : NAN)
             .add("psnr", psnr_sum / logged).add("time_per_step", time_sum / logged)
             .add("rays_per_second", rays_sum / time_sum)
-            .add("loader_wait", loader.wait_seconds());
-        metrics_log.write(line);
+            .add("loader_wait", loader.wait_seconds())
+            .add("world_size", procs).add("global_batch", world);
+        if (comm) line.add("allreduce_seconds", allreduce_sum / logged);
+        metrics_log->write(line);
         char note[96];
         std::snprintf(note, sizeof note, "epoch %d loss %.4f psnr %.2f", epoch, loss_sum / logged, psnr_sum / logged);
-        progress.advance(logged, note);
-        loss_sum = psnr_sum = time_sum = 0;
+        progress->advance(logged, note);
+      }
+      if (st.step % tc.log_every_steps == 0 || st.step == stop_step) {
+        loss_sum = psnr_sum = time_sum = allreduce_sum = 0;
         rays_sum = logged = 0;
       }
-      if (tc.max_minutes > 0 && minutes() >= tc.max_minutes) {
-        spdlog::info("time budget of {} minutes reached at step {}", tc.max_minutes, st.step);
-        checkpoint(st, false);
-        plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
-        summary.steps = st.step;
-        summary.epoch = epoch;
-        summary.checkpoint = last_ckpt;
-        return summary;
+      if (tc.max_minutes > 0) {
+        bool out_of_time = minutes() >= tc.max_minutes;  // rank 0's clock decides for all
+        if (comm) out_of_time = comm->sum({lead && out_of_time ? 1.0 : 0.0}, "the time budget")[0] > 0;
+        if (out_of_time) {
+          spdlog::info("time budget of {} minutes reached at step {}", tc.max_minutes, st.step);
+          on_lead([&] {
+            checkpoint(st, false);
+            plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
+          }, "the time-budget checkpoint");
+          finish(summary, epoch);
+          return summary;
+        }
       }
     }
     if (st.iteration == tc.iters_per_epoch) {  // epoch complete
@@ -248,21 +361,23 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
       st.iteration = 0;
       const bool last = st.epoch == tc.epochs;
       const auto due = [&](int every) { return last || (every > 0 && st.epoch % every == 0); };
-      if (due(tc.save_every_epochs)) checkpoint(st, true);
-      if (val_set && due(tc.val_every_epochs))
-      {
-        summary.last_val_psnr = validate(*model, config, *val_set, tokens, canonical, device,
-                                         val_dir, st.epoch, metrics_log, st.step);
-        plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
-      }
+      if (due(tc.save_every_epochs) || (val_set && due(tc.val_every_epochs)) || (comm && due(tc.val_every_epochs)))
+        on_lead([&] {
+          if (due(tc.save_every_epochs)) checkpoint(st, true);
+          if (val_set && due(tc.val_every_epochs)) {
+            summary.last_val_psnr = validate(*model, config, *val_set, tokens, canonical, device,
+                                             val_dir, st.epoch, *metrics_log, st.step);
+            plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
+          }
+        }, "the checkpoint and validation of epoch " + std::to_string(st.epoch));
     }
   }
-  progress.finish();
-  checkpoint(st, false);
-  plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
-  summary.steps = st.step;
-  summary.epoch = st.epoch;
-  summary.checkpoint = last_ckpt;
+  on_lead([&] {
+    progress->finish();
+    checkpoint(st, false);
+    plot_training_curve(run / "metrics.jsonl", run / "training_curve.png");
+  }, "the final checkpoint");
+  finish(summary, st.epoch);
   return summary;
 }
 

@@ -13,12 +13,24 @@
 #include "core/config.hpp"
 #include "model/transhuman.hpp"
 
+namespace th::dist {
+class Communicator;
+}
+
 namespace th::train {
 
 struct TrainOptions {
   std::filesystem::path run_dir;  // config.yaml, log.txt, metrics.jsonl, checkpoints/, val/
   bool resume = false;            // continue from run_dir/checkpoints/latest.pt
   int64_t max_steps = -1;         // stop after this global step (tests; -1: the config's length)
+  // Data-parallel training: this process's rank (null: a single process). Rank 0 reads the
+  // checkpoint and broadcasts its state, and alone writes into run_dir.
+  std::shared_ptr<dist::Communicator> comm = nullptr;
+  // Samples of this many consecutive ranks per step in this one process (gradient accumulation):
+  // 2 without `comm` computes exactly the steps of a 2-rank run.
+  int virtual_ranks = 1;
+  // Tests: every rank writes its final state to <dir>/rank<r>.pt (empty: not written).
+  std::filesystem::path rank_state_dir = {};
 };
 
 struct TrainSummary {

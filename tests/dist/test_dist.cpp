@@ -1,0 +1,290 @@
+#include <catch2/catch.hpp>
+
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <set>
+
+#include "core/config_io.hpp"
+#include "core/error.hpp"
+#include "data/sampler.hpp"
+#include "dist/communicator.hpp"
+#include "dist/launcher.hpp"
+#include "support/test_env.hpp"
+#include "dist/processes.hpp"
+#include "train/trainer.hpp"
+
+namespace fs = std::filesystem;
+using th::test::Process;
+
+namespace {
+
+// The tiny training configuration of tests/train, as command-line overrides.
+std::vector<std::string> tiny_overrides(std::vector<std::string> extra = {}) {
+  const auto root = th::test::tiny_dataset();
+  std::vector<std::string> o{"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+                             "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
+                             "train.val_views=0"};
+  o.insert(o.end(), extra.begin(), extra.end());
+  return o;
+}
+
+th::Config tiny_config(std::vector<std::string> extra = {}) {
+  return th::config::load<th::Config>("tests/configs/tiny_train.yaml", tiny_overrides(std::move(extra)));
+}
+
+std::vector<std::string> train_command(const fs::path& out, const std::vector<std::string>& extra_args,
+                                       const std::vector<std::string>& overrides) {
+  std::vector<std::string> args{th::test::train_executable().string(), "--config",
+                                "tests/configs/tiny_train.yaml", "--out", out.string()};
+  args.insert(args.end(), extra_args.begin(), extra_args.end());
+  args.insert(args.end(), overrides.begin(), overrides.end());
+  return args;
+}
+
+// Rank `r` of `world` started by hand (as any launcher would).
+Process start_rank(int r, int world, int port, const std::vector<std::string>& args, const fs::path& log) {
+  return th::test::spawn(args, {"RANK=" + std::to_string(r), "WORLD_SIZE=" + std::to_string(world),
+                                "LOCAL_RANK=" + std::to_string(r), "LOCAL_WORLD_SIZE=" + std::to_string(world),
+                                "MASTER_ADDR=127.0.0.1", "MASTER_PORT=" + std::to_string(port)},
+                         log);
+}
+
+struct State {
+  std::map<std::string, torch::Tensor> params, buffers;
+  int64_t step = 0;
+};
+
+State state_of(const fs::path& checkpoint, const th::Config& c) {
+  th::model::TransHuman model(c.model, c.render.cull_distance);
+  th::train::load_weights(*model, checkpoint);
+  State s;
+  for (const auto& p : model->named_parameters()) s.params[p.key()] = p.value().clone();
+  for (const auto& b : model->named_buffers()) s.buffers[b.key()] = b.value().clone();
+  torch::serialize::InputArchive root;
+  root.load_from(checkpoint.string());
+  torch::Tensor step;
+  root.read("step", step);
+  s.step = step.item<int64_t>();
+  return s;
+}
+
+double max_difference(const std::map<std::string, torch::Tensor>& a, const std::map<std::string, torch::Tensor>& b) {
+  REQUIRE(a.size() == b.size());
+  double d = 0;
+  for (const auto& [name, t] : a) d = std::max(d, (t - b.at(name)).abs().max().item<double>());
+  return d;
+}
+
+size_t count_differing(const std::map<std::string, torch::Tensor>& a, const std::map<std::string, torch::Tensor>& b) {
+  size_t n = 0;
+  for (const auto& [name, t] : a) n += !torch::equal(t, b.at(name));
+  return n;
+}
+
+std::string describe(int status) {
+  if (WIFEXITED(status)) return "exit " + std::to_string(WEXITSTATUS(status));
+  if (WIFSIGNALED(status)) return "signal " + std::to_string(WTERMSIG(status));
+  return "status " + std::to_string(status);
+}
+
+// Waits until `file` exists or `process` ends or `seconds` pass; true when the file exists.
+bool wait_for_file(const fs::path& file, const Process& process, double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (fs::exists(file)) return true;
+    if (::waitpid(process.pid, nullptr, WNOHANG) == process.pid) return fs::exists(file);
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return false;
+}
+
+}  // namespace
+
+TEST_CASE("the sharded sampler gives each rank different samples of the same epoch", "[dist]") {
+  const size_t n = 12;
+  const th::data::ShardedSampler two(n, 42, 2);
+  const auto r0 = two.draw(3, 0, 6, {0}), r1 = two.draw(3, 0, 6, {1});
+  // 6 iterations x 2 ranks = the 12 samples of the epoch, each drawn once, by one rank.
+  std::multiset<size_t> all(r0.order.begin(), r0.order.end());
+  all.insert(r1.order.begin(), r1.order.end());
+  CHECK(all.size() == n);
+  CHECK(std::set<size_t>(all.begin(), all.end()).size() == n);
+  // Both ranks of one process (interleaved per iteration) draw what the two ranks draw apart.
+  const auto both = two.draw(3, 0, 6, {0, 1});
+  for (size_t it = 0; it < 6; ++it) {
+    CHECK(both.order[2 * it] == r0.order[it]);
+    CHECK(both.order[2 * it + 1] == r1.order[it]);
+    CHECK(both.seeds[2 * it + 1] == r1.seeds[it]);
+  }
+  CHECK(r0.seeds != r1.seeds);
+  // Resuming inside an epoch continues the same sequence.
+  const auto tail = two.draw(3, 4, 6, {1});
+  CHECK(std::vector<size_t>(r1.order.begin() + 4, r1.order.end()) == tail.order);
+  // Another epoch, another order; the same epoch, the same order.
+  CHECK(two.draw(4, 0, 6, {0}).order != r0.order);
+  CHECK(two.draw(3, 0, 6, {0}).order == r0.order);
+  // With one rank the epoch is the permutation itself (cycled when longer than the dataset).
+  const th::data::ShardedSampler one(n, 42, 1);
+  const auto perm = one.permutation(3);
+  const auto single = one.draw(3, 0, int(n) + 2, {0});
+  for (size_t i = 0; i < n + 2; ++i) CHECK(single.order[i] == perm[i % n]);
+}
+
+TEST_CASE("the launcher environment is read, and bad values are named", "[dist]") {
+  auto set = [](const char* k, const char* v) { v ? ::setenv(k, v, 1) : ::unsetenv(k); };
+  for (const char* k : {"RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"}) set(k, nullptr);
+  CHECK_FALSE(th::dist::environment_from_env().has_value());
+  set("WORLD_SIZE", "4");
+  set("RANK", "3");
+  set("MASTER_ADDR", "node17");
+  set("MASTER_PORT", "29611");
+  auto e = th::dist::environment_from_env();
+  REQUIRE(e.has_value());
+  CHECK(e->world_size == 4);
+  CHECK(e->rank == 3);
+  CHECK(e->local_rank == 3);
+  CHECK(e->master_addr == "node17");
+  CHECK(e->master_port == 29611);
+  set("RANK", "4");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK='4'"));
+  set("RANK", "x1");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK='x1'"));
+  set("RANK", nullptr);
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK is not"));
+  set("RANK", "0");
+  set("MASTER_PORT", "70000");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("MASTER_PORT"));
+  for (const char* k : {"RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"}) set(k, nullptr);
+  // NCCL is refused clearly where it cannot work.
+  CHECK_THROWS_WITH(th::dist::resolve_backend("nccl", torch::kCPU), Catch::Contains("nccl"));
+  CHECK(th::dist::resolve_backend("auto", torch::kCPU) == "gloo");
+}
+
+TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulating both ranks' samples",
+          "[dist][slow]") {
+  const int K = 3;
+  const fs::path dir = th::test::scratch_dir("dist_two_ranks");
+  const auto overrides = tiny_overrides();
+  // transhuman-train --nproc 2: the launcher starts both ranks.
+  const Process launcher = th::test::spawn(
+      train_command(dir / "run", {"--nproc", "2", "--max-steps", std::to_string(K), "--rank-state",
+                                  (dir / "ranks").string()},
+                    overrides),
+      {}, dir / "launcher.log");
+  const auto status = th::test::wait_for(launcher, 150);
+  if (!status) th::test::kill_and_reap(launcher);
+  INFO(th::test::read_text(dir / "launcher.log"));
+  REQUIRE(status.has_value());
+  REQUIRE(describe(*status) == "exit 0");
+
+  const auto c = tiny_config();
+  const State r0 = state_of(dir / "ranks" / "rank0.pt", c), r1 = state_of(dir / "ranks" / "rank1.pt", c);
+  CHECK(r0.step == K);
+  CHECK(r1.step == K);
+  CHECK(count_differing(r0.params, r1.params) == 0);
+  CHECK(count_differing(r0.buffers, r1.buffers) == 0);
+
+  // One process, each step's gradient over the two samples the ranks drew.
+  torch::set_num_threads(1);
+  th::train::TrainOptions one{dir / "single", false, K};
+  one.virtual_ranks = 2;
+  one.rank_state_dir = dir / "single_state";
+  CHECK(th::train::train(c, torch::kCPU, one).steps == K);
+  const State acc = state_of(dir / "single_state" / "rank0.pt", c);
+  CHECK(max_difference(r0.params, acc.params) <= 1e-5);
+
+  // Control: training changed the weights well beyond that tolerance, and one process on its
+  // own samples ends elsewhere (so the comparison above can fail).
+  torch::manual_seed(uint64_t(c.seed));
+  th::model::TransHuman fresh(c.model, c.render.cull_distance);
+  std::map<std::string, torch::Tensor> initial;
+  for (const auto& p : fresh->named_parameters()) initial[p.key()] = p.value();
+  CHECK(max_difference(r0.params, initial) > 1e-3);
+  th::train::TrainOptions alone{dir / "alone", false, K};
+  alone.rank_state_dir = dir / "alone_state";
+  th::train::train(c, torch::kCPU, alone);
+  CHECK(max_difference(r0.params, state_of(dir / "alone_state" / "rank0.pt", c).params) > 1e-4);
+
+  // Rank 0 alone wrote the run: metrics with the world size and the global batch.
+  std::ifstream metrics(dir / "run" / "metrics.jsonl");
+  std::string line;
+  std::getline(metrics, line);
+  CHECK_THAT(line, Catch::Contains("\"world_size\": 2") && Catch::Contains("\"global_batch\": 2") &&
+                       Catch::Contains("\"allreduce_seconds\""));
+  CHECK(fs::exists(dir / "run" / "checkpoints" / "latest.pt"));
+}
+
+TEST_CASE("a killed rank makes the other exit with an error within the timeout, and 1 rank resumes",
+          "[dist][slow]") {
+  const double timeout = 10;
+  const fs::path dir = th::test::scratch_dir("dist_kill");
+  const int port = th::dist::free_port();
+  const auto args = train_command(dir / "run", {}, tiny_overrides({"train.epochs=1000", "train.save_every_epochs=1",
+                                                                   "train.dist_timeout_s=" + std::to_string(timeout)}));
+  const Process r0 = start_rank(0, 2, port, args, dir / "rank0.log");
+  const Process r1 = start_rank(1, 2, port, args, dir / "rank1.log");
+  const bool trained = wait_for_file(dir / "run" / "checkpoints" / "epoch_0001.pt", r0, 120);
+  INFO(th::test::read_text(dir / "rank0.log") + th::test::read_text(dir / "rank1.log"));
+  if (!trained) {
+    th::test::kill_and_reap(r0);
+    th::test::kill_and_reap(r1);
+  }
+  REQUIRE(trained);
+
+  th::test::kill_and_reap(r1);
+  const auto killed = std::chrono::steady_clock::now();
+  const auto status = th::test::wait_for(r0, timeout + 20);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
+  if (!status) th::test::kill_and_reap(r0);
+  REQUIRE(status.has_value());
+  CHECK(describe(*status) != "exit 0");
+  CHECK(WIFEXITED(*status));  // an orderly error exit, not a crash
+  CHECK(took < timeout + 5);
+  CHECK_THAT(th::test::read_text(dir / "rank0.log"), Catch::Contains("error") && Catch::Contains("rank"));
+
+  // The run continues from its last checkpoint with one rank.
+  const auto c = tiny_config({"train.epochs=1000", "train.save_every_epochs=1"});
+  const State saved = state_of(dir / "run" / "checkpoints" / "latest.pt", c);
+  REQUIRE(saved.step >= 3);
+  torch::set_num_threads(1);
+  const auto resumed = th::train::train(c, torch::kCPU, {dir / "run", true, saved.step + 2});
+  CHECK(resumed.steps == saved.step + 2);
+  // Its metrics continue at the next step, with one rank.
+  std::ifstream metrics(dir / "run" / "metrics.jsonl");
+  std::string line, last;
+  while (std::getline(metrics, line))
+    if (!line.empty()) last = line;
+  CHECK_THAT(last, Catch::Contains("\"step\": " + std::to_string(saved.step + 2)) &&
+                       Catch::Contains("\"world_size\": 1"));
+}
+
+TEST_CASE("a hung rank makes the other exit with an error within the timeout", "[dist][slow]") {
+  const double timeout = 5;
+  const fs::path dir = th::test::scratch_dir("dist_hang");
+  const int port = th::dist::free_port();
+  const auto args = train_command(dir / "run", {}, tiny_overrides({"train.epochs=1000",
+                                                                   "train.dist_timeout_s=" + std::to_string(timeout)}));
+  const Process r0 = start_rank(0, 2, port, args, dir / "rank0.log");
+  const Process r1 = start_rank(1, 2, port, args, dir / "rank1.log");
+  const bool training = wait_for_file(dir / "run" / "metrics.jsonl", r0, 120);
+  INFO(th::test::read_text(dir / "rank0.log") + th::test::read_text(dir / "rank1.log"));
+  if (!training) {
+    th::test::kill_and_reap(r0);
+    th::test::kill_and_reap(r1);
+  }
+  REQUIRE(training);
+  ::kill(r1.pid, SIGSTOP);  // alive but not answering
+  const auto stopped = std::chrono::steady_clock::now();
+  const auto status = th::test::wait_for(r0, timeout + 30);
+  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - stopped).count();
+  th::test::kill_and_reap(r1);
+  if (!status) th::test::kill_and_reap(r0);
+  REQUIRE(status.has_value());
+  CHECK(WIFEXITED(*status));
+  CHECK(describe(*status) != "exit 0");
+  CHECK(took < timeout + 10);
+  CHECK_THAT(th::test::read_text(dir / "rank0.log"), Catch::Contains("died or hung"));
+}
