@@ -94,9 +94,16 @@ FrameBody Dataset::load_body(const HumanSequence& human, int frame) const {
   return b;
 }
 
-Sample Dataset::load(size_t index, uint64_t seed) const {
-  const Item& it = item(index);
-  const HumanSequence& human = *humans_[it.human];
+Sample Dataset::load(size_t index, uint64_t seed) const { return load_item(item(index), seed); }
+
+Sample Dataset::load_item(const Item& it, uint64_t seed) const {
+  if (it.human < 0 || size_t(it.human) >= humans_.size())
+    fail("dataset '", setting_.name, "': no human #", it.human, " (it has ", humans_.size(), ")");
+  const HumanSequence& human = *humans_[size_t(it.human)];
+  if (it.frame < 0 || it.frame >= human.num_frames())
+    fail(human.name(), ": no frame ", it.frame, " (it has ", human.num_frames(), ")");
+  if (it.target_view < 0 || it.target_view >= human.num_cameras())
+    fail(human.name(), ": no camera ", it.target_view, " (it has ", human.num_cameras(), ")");
   std::mt19937_64 rng(seed);
   const bool train = mode_ == Mode::Train;
 

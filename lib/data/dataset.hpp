@@ -84,6 +84,10 @@ class Dataset {
   // Loads sample `index`. Everything random (reference views, jitter, patches) is drawn from
   // `seed`, so a sample is reproducible and independent of the loading thread.
   Sample load(size_t index, uint64_t seed) const;
+  // Loads any (human, frame, target view) of the setting's humans the same way, also frames
+  // and views the setting does not list (free-viewpoint rendering of a whole sequence).
+  // Throws th::Error naming the human and the valid range for an index out of range.
+  Sample load_item(const Item& item, uint64_t seed) const;
   // The body of a frame (LBS + vertices file).
   FrameBody load_body(const HumanSequence& human, int frame) const;
 

@@ -189,6 +189,12 @@ torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tens
   return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
 }
 
+torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tensor& pts) {
+  const auto t = trunk(cache, pts);
+  ScopedTimer timer(profile_, "heads");
+  return heads->density(t.e);
+}
+
 torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
                                                     const torch::Tensor& dirs) {
   const auto t = trunk(cache, pts);

@@ -37,6 +37,10 @@ class TransHumanImpl : public torch::nn::Module {
   torch::Tensor forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
                                       const torch::Tensor& dirs);
 
+  // Only the density sigma_raw (N) of points (N, 3) world: the colour branch is skipped (mesh
+  // extraction). One chunk, as forward.
+  torch::Tensor density(const FrameCache& cache, const torch::Tensor& pts);
+
   // Per-stage wall times are added to `profile` when set (benchmarks).
   void set_profile(render::Profile* profile) { profile_ = profile; }
   const ModelConfig& config() const { return config_; }

@@ -94,7 +94,7 @@ void FrameWriter::write_frame(int index, const torch::Tensor& rgb) {
 VideoResult FrameWriter::write_video(int n) const {
   TORCH_CHECK(n >= 1, "write_video: n must be >= 1");
   VideoResult result;
-  result.path = options_.dir / options_.video_name;
+  result.path = (options_.dir / options_.video_name).lexically_normal();
   // Every frame is checked before encoding starts: a missing one is the user's error, not a
   // half-written video.
   for (int i = 0; i < n; ++i)

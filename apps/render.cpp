@@ -1,0 +1,53 @@
+// transhuman-render: free-viewpoint video of a person from a trained checkpoint (SPEC 7).
+#include <spdlog/spdlog.h>
+
+#include <iostream>
+
+#include "app/app.hpp"
+#include "app/summary.hpp"
+#include "core/error.hpp"
+#include "inference/free_view.hpp"
+
+int main(int argc, char** argv) {
+  return th::app::guarded_main("transhuman-render", [&]() -> int {
+    CLI::App cli{"Render free-viewpoint video of a person with a trained TransHuman checkpoint.\n"
+                 "Cameras: the orbit of SPEC 7 (default, 36 views), a camera path file (--path) or\n"
+                 "one dataset camera (--camera). Writes frames/*.png, video.mp4 (30 fps),\n"
+                 "cameras.yaml and contact_sheet.png into --out; rerunning resumes."};
+    th::app::CommonOptions options;
+    th::inference::VideoRequest request;
+    std::string checkpoint, setting, frames;
+    th::app::add_common_options(cli, options);
+    cli.add_option("--checkpoint", checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
+    cli.add_option("--setting", setting, "split setting whose people and reference views are used (default: eval.setting)");
+    cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
+    cli.add_option("--frames", frames, "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
+    auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)");
+    auto* path = cli.add_option("--path", request.path_file, "camera path file (YAML/JSON, see README)");
+    auto* camera = cli.add_option("--camera", request.camera, "render from this dataset camera");
+    orbit->excludes(path)->excludes(camera);
+    path->excludes(camera);
+    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (SPEC 7: 3)");
+    cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)");
+    cli.add_option("--height", request.height, "output height");
+    cli.add_flag("--force", request.force, "replace frames of an earlier, different request in --out");
+    CLI11_PARSE(cli, argc, argv);
+    if (!setting.empty()) options.overrides.push_back("eval.setting=" + setting);
+    if (!options.dry_run && checkpoint.empty()) th::fail("--checkpoint is required");
+    if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
+    if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;
+    if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;
+
+    const auto ctx = th::app::start_run(options, "transhuman-render", "runs/render");
+    th::app::print_summary(ctx);
+    if (options.dry_run) return 0;
+    const th::inference::Session session(ctx.config, ctx.device, checkpoint);
+    const auto s = th::inference::render_video(session, request, ctx.run_dir);
+    spdlog::info("{} frames ({} rendered, {} resumed), {:.2f} s/frame, in {}", s.frames, s.rendered,
+                 s.skipped, s.seconds_per_frame, s.frames_dir.string());
+    if (s.video_written) spdlog::info("{}", s.video_message);
+    else spdlog::warn("{}", s.video_message);
+    if (!s.contact_sheet.empty()) spdlog::info("contact sheet: {}", s.contact_sheet.string());
+    return 0;
+  });
+}

@@ -1,0 +1,196 @@
+#include "inference/free_view.hpp"
+
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+#include <yaml-cpp/yaml.h>
+
+#include <chrono>
+#include <fstream>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "core/progress.hpp"
+#include "video/contact_sheet.hpp"
+#include "video/frame_writer.hpp"
+
+namespace th::inference {
+namespace fs = std::filesystem;
+
+torch::Tensor scale_intrinsics(const torch::Tensor& K, double sx, double sy) {
+  auto out = K.to(torch::kFloat64).clone();
+  out[0] *= sx;
+  out[1] *= sy;
+  out[2] = torch::tensor({0.0, 0.0, 1.0}, torch::kFloat64);
+  return out;
+}
+
+std::vector<int> parse_frame_range(const std::string& text) {
+  std::vector<int> parts;
+  std::stringstream ss(text);
+  std::string item;
+  while (std::getline(ss, item, ':')) {
+    size_t used = 0;
+    int value = 0;
+    try {
+      value = std::stoi(item, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (item.empty() || used != item.size())
+      fail("frame range '", text, "': expected FRAME, BEGIN:END or BEGIN:END:STEP");
+    parts.push_back(value);
+  }
+  if (!text.empty() && text.back() == ':') parts.clear();
+  if (parts.size() == 1) return parts;
+  if (parts.size() < 2 || parts.size() > 3)
+    fail("frame range '", text, "': expected FRAME, BEGIN:END or BEGIN:END:STEP");
+  const int step = parts.size() == 3 ? parts[2] : 1;
+  if (step <= 0) fail("frame range '", text, "': the step must be positive");
+  std::vector<int> frames;
+  for (int f = parts[0]; f < parts[1]; f += step) frames.push_back(f);
+  if (frames.empty()) fail("frame range '", text, "' is empty");
+  return frames;
+}
+
+namespace {
+
+// What makes two runs' frames interchangeable; written to request.yaml.
+std::string describe(const VideoRequest& r, const std::string& human, const std::vector<int>& frames,
+                     int width, int height, int count) {
+  YAML::Emitter y;
+  y << YAML::BeginMap << YAML::Key << "human" << YAML::Value << human;
+  y << YAML::Key << "frames" << YAML::Value << YAML::Flow << frames;
+  const char* kind = r.cameras == VideoRequest::Cameras::Orbit      ? "orbit"
+                     : r.cameras == VideoRequest::Cameras::PathFile ? "path_file"
+                                                                    : "dataset_camera";
+  y << YAML::Key << "cameras" << YAML::Value << kind;
+  if (r.cameras == VideoRequest::Cameras::PathFile)
+    y << YAML::Key << "path_file" << YAML::Value << fs::absolute(r.path_file).string();
+  if (r.cameras == VideoRequest::Cameras::Dataset) y << YAML::Key << "camera" << YAML::Value << r.camera;
+  if (r.cameras == VideoRequest::Cameras::Orbit) y << YAML::Key << "view" << YAML::Value << r.view;
+  y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value << height;
+  y << YAML::Key << "video_frames" << YAML::Value << count << YAML::EndMap;
+  return std::string(y.c_str()) + "\n";
+}
+
+std::string read_text(const fs::path& file) {
+  std::ifstream in(file);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+}  // namespace
+
+VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir) {
+  const int h = session.find_human(request.human);
+  const auto& human = session.human(h);
+  std::vector<int> frames = request.frames;
+  if (frames.empty()) {
+    const auto listed = session.setting_frames(h);
+    if (listed.empty()) fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
+    frames = {listed.front()};
+  }
+  for (int f : frames)
+    if (f < 0 || f >= human.num_frames())
+      fail(human.name(), ": frame ", f, " out of range [0, ", human.num_frames(), ")");
+
+  // The camera whose image the output is modelled on: its K (at data.ratio) and size.
+  using Cameras = VideoRequest::Cameras;
+  const int base_view = request.cameras == Cameras::Dataset ? request.camera : request.view;
+  if (base_view < 0 || base_view >= human.num_cameras())
+    fail(human.name(), ": camera ", base_view, " out of range [0, ", human.num_cameras(), ")");
+  PreparedFrame prepared = session.prepare(h, frames.front(), base_view);
+  const int src_w = int(prepared.sample.target_image.size(1)), src_h = int(prepared.sample.target_image.size(0));
+  int width = request.width > 0 ? request.width : src_w;
+  int height = request.height > 0 ? request.height : src_h;
+
+  // The camera of every video frame.
+  const auto base = session.dataset_camera(prepared, base_view);
+  const auto K = scale_intrinsics(base.K, double(width) / src_w, double(height) / src_h);
+  std::vector<video::PathCamera> cameras;  // the path, cycled over the video
+  int count = 0;
+  std::vector<video::PathCamera> shots;
+  if (request.cameras == Cameras::Orbit) {
+    std::vector<torch::Tensor> Rs, Ts;
+    for (int c = 0; c < human.num_cameras(); ++c) {
+      Rs.push_back(human.camera(c).R);
+      Ts.push_back(human.camera(c).T);
+    }
+    const auto orbit = video::make_orbit(torch::stack(Rs), torch::stack(Ts));
+    const int n = request.orbit_views > 0 ? request.orbit_views : (frames.size() > 1 ? int(frames.size()) : 36);
+    count = std::max(int(frames.size()), n);
+    for (int k = 0; k < count; ++k) {  // looking at the centre of the body of the frame shown
+      const int frame = frames[size_t(k) % frames.size()];
+      const double theta = 2.0 * M_PI * double(k % n) / double(n);
+      shots.push_back(video::orbit_camera(orbit, K, session.body_center(h, frame), theta));
+    }
+  } else {
+    if (request.cameras == Cameras::PathFile) {
+      const auto path = video::read_camera_path(request.path_file);
+      if (path.cameras.empty()) fail("camera path '", request.path_file.string(), "' has no cameras");
+      cameras = path.cameras;
+      if (request.width <= 0 && path.width > 0) width = path.width;
+      if (request.height <= 0 && path.height > 0) height = path.height;
+    } else {
+      cameras = {{K, base.R, base.T}};
+    }
+    count = int(std::max(frames.size(), cameras.size()));
+    for (int k = 0; k < count; ++k) shots.push_back(cameras[size_t(k) % cameras.size()]);
+  }
+
+  // Resume only what the same request wrote.
+  fs::create_directories(out_dir);
+  const fs::path frames_dir = out_dir / "frames", request_file = out_dir / "request.yaml";
+  const std::string wanted = describe(request, human.name(), frames, width, height, count);
+  if (fs::exists(request_file) && read_text(request_file) != wanted) {
+    if (!request.force)
+      fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
+           "); use another --out or --force to replace them");
+    fs::remove_all(frames_dir);
+  }
+  std::ofstream(request_file) << wanted;
+  video::write_camera_path(out_dir / "cameras.yaml", {shots, width, height});
+
+  video::FrameWriterOptions wo;
+  wo.dir = frames_dir;
+  wo.video_name = "../video.mp4";
+  video::FrameWriter writer(wo);
+  VideoSummary summary;
+  summary.frames = count;
+  summary.frames_dir = frames_dir;
+  summary.skipped = count - writer.missing(count);
+  spdlog::info("video: {} frames of {} ({} body frame{}), {}x{}{}", count, human.name(), frames.size(),
+               frames.size() > 1 ? "s" : "", width, height,
+               summary.skipped ? fmt::format(", {} already written (resumed)", summary.skipped) : "");
+
+  Progress progress("render", count - summary.skipped, "frame");
+  double render_seconds = 0;
+  for (int k = 0; k < count; ++k) {
+    if (writer.has_frame(k)) continue;
+    const int frame = frames[size_t(k) % frames.size()];
+    const auto t0 = std::chrono::steady_clock::now();
+    if (prepared.frame != frame) prepared = session.prepare(h, frame, base_view);
+    writer.write_frame(k, session.render(prepared, shots[size_t(k)], width, height));
+    render_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ++summary.rendered;
+    progress.advance(1, "frame " + std::to_string(k) + " body " + std::to_string(frame));
+  }
+  progress.finish();
+  summary.seconds_per_frame = summary.rendered ? render_seconds / summary.rendered : 0.0;
+
+  const auto video = writer.write_video(count);
+  summary.video_written = video.written;
+  summary.video_message = video.message;
+  if (request.contact_sheet_frames > 0) {
+    std::vector<fs::path> paths;
+    for (int k = 0; k < count; ++k) paths.push_back(writer.frame_path(k));
+    const int columns = std::min(6, std::min(count, request.contact_sheet_frames));
+    summary.contact_sheet = out_dir / "contact_sheet.png";
+    video::write_png(summary.contact_sheet,
+                     video::contact_sheet(paths, request.contact_sheet_frames, columns, std::min(width, 256)));
+  }
+  return summary;
+}
+
+}  // namespace th::inference

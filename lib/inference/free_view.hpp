@@ -1,0 +1,56 @@
+#pragma once
+// Free-viewpoint video (SPEC 7): a trained model renders one person from a moving virtual
+// camera, for one frame or a frame range (the person moving while the camera orbits), with
+// the setting's fixed reference views. Cameras: the orbit of SPEC 7, a camera path file
+// (video/camera_path.hpp), or one dataset camera. Output: PNG frames, an mp4 at 30 fps, the
+// camera path as a file, a contact sheet. Resumable: frames already written are skipped, as
+// long as the request is the same one (request.yaml in the output folder says which).
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "inference/session.hpp"
+
+namespace th::inference {
+
+struct VideoRequest {
+  std::string human;                 // folder name; empty: the setting's first person
+  std::vector<int> frames;           // body frames (annots indices); empty: the setting's first
+  enum class Cameras { Orbit, PathFile, Dataset } cameras = Cameras::Orbit;
+  int orbit_views = 0;               // orbit cameras; 0: 36, or one per frame of a frame range
+  std::filesystem::path path_file;   // Cameras::PathFile
+  int camera = 0;                    // Cameras::Dataset: camera index
+  int view = 3;                      // the orbit's intrinsics and image size (SPEC 7: view 3)
+  int width = 0, height = 0;         // output size; 0: the view's image at data.ratio (K scaled)
+  bool force = false;                // discard frames of an earlier, different request
+  int contact_sheet_frames = 12;     // 0: no contact sheet
+};
+
+struct VideoSummary {
+  int frames = 0;      // video length
+  int rendered = 0;    // rendered by this run
+  int skipped = 0;     // already there (resumed)
+  double seconds_per_frame = 0;
+  std::filesystem::path frames_dir;
+  bool video_written = false;
+  std::string video_message;
+  std::filesystem::path contact_sheet;  // empty when not made
+};
+
+// Video frame k shows body frame frames[k % F] from camera cameras[k % C]; the video has
+// max(F, C) frames. The orbit looks at the centre of each frame's body box. Throws th::Error
+// for a bad request (unknown person, frame or camera out of range, unreadable path file, an
+// output folder holding another request's frames without `force`).
+VideoSummary render_video(const Session& session, const VideoRequest& request,
+                          const std::filesystem::path& out_dir);
+
+// "12" -> {12}; "0:60" -> 0..59; "0:60:5" -> 0, 5, ..., 55 (end exclusive, as Python's
+// range). Throws th::Error quoting the text when it is malformed or empty.
+std::vector<int> parse_frame_range(const std::string& text);
+
+// K for an image resized by sx along x and sy along y: rows 0 and 1 scaled, without a
+// half-pixel shift, as the dataset reader scales K by data.ratio (float64 (3, 3)).
+torch::Tensor scale_intrinsics(const torch::Tensor& K, double sx, double sy);
+
+}  // namespace th::inference

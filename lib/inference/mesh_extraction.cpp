@@ -1,0 +1,107 @@
+#include "inference/mesh_extraction.hpp"
+
+#include <opencv2/core.hpp>
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <chrono>
+
+#include "core/error.hpp"
+#include "core/progress.hpp"
+#include "geometry/mesh.hpp"
+#include "mesh/marching_cubes.hpp"
+#include "mesh/ply.hpp"
+#include "mesh/preview.hpp"
+#include "video/frame_writer.hpp"
+
+namespace th::inference {
+namespace fs = std::filesystem;
+
+MeshSummary extract_mesh(const Session& session, const MeshRequest& request, const fs::path& out_dir) {
+  if (!(request.voxel > 0)) fail("mesh voxel size must be positive, got ", request.voxel);
+  const int h = session.find_human(request.human);
+  const auto& human = session.human(h);
+  int frame = request.frame;
+  if (frame < 0) {
+    const auto listed = session.setting_frames(h);
+    if (listed.empty()) fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
+    frame = listed.front();
+  }
+  if (request.view < 0 || request.view >= human.num_cameras())
+    fail(human.name(), ": camera ", request.view, " out of range [0, ", human.num_cameras(), ")");
+  const auto t0 = std::chrono::steady_clock::now();
+  const PreparedFrame prepared = session.prepare(h, frame, request.view);
+
+  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7).
+  const auto grid = mesh::grid_over_bounds(prepared.sample.body.bounds.to(torch::kFloat64), request.voxel);
+  const int64_t plane = grid.height * grid.width;
+  const int64_t slab = std::max<int64_t>(1, request.slab_points / std::max<int64_t>(1, plane));
+  MeshSummary summary;
+  summary.grid = {grid.width, grid.height, grid.depth};
+  spdlog::info("mesh: {} frame {} | grid {} x {} x {} at {} mm | threshold {}", human.name(), frame,
+               grid.width, grid.height, grid.depth, request.voxel * 1000, request.threshold);
+  mesh::MarchingCubes mc(grid.height, grid.width, grid.spec, {request.threshold, 10, 0.f});
+  Progress progress("density", grid.depth, "slice");
+  std::vector<torch::Tensor> seen;  // a subsample of the evaluated densities, for the statistics
+  for (int64_t z0 = 0; z0 < grid.depth; z0 += slab) {
+    const int64_t d = std::min(slab, grid.depth - z0);
+    const auto sigma = session.density(prepared, mesh::slab_points(grid, z0, d));
+    const auto evaluated = sigma.index({sigma != 0});
+    summary.evaluated_points += evaluated.numel();
+    seen.push_back(evaluated.slice(0, 0, evaluated.numel(), std::max<int64_t>(1, evaluated.numel() / 4096)));
+    mc.push(sigma.reshape({d, grid.height, grid.width}));
+    progress.advance(d);
+  }
+  progress.finish();
+  summary.mesh = mc.finish();
+  // Where the threshold sits in the density the network produced near the body: what a user
+  // needs to choose another one (a briefly trained model's density stays low).
+  const auto all = torch::cat(seen).to(torch::kFloat64);
+  std::string stats = "no point near the body";
+  if (all.numel()) {
+    const auto q = torch::quantile(all, torch::tensor({0.5, 0.9, 0.99}, torch::kFloat64));
+    stats = fmt::format("density near the body: median {:.1f}, 90% {:.1f}, 99% {:.1f}, max {:.1f}; {:.2f}% above {}",
+                        q[0].item<double>(), q[1].item<double>(), q[2].item<double>(), all.max().item<double>(),
+                        100.0 * (all > request.threshold).to(torch::kFloat64).mean().item<double>(),
+                        request.threshold);
+  }
+  spdlog::info("mesh: {}", stats);
+  if (summary.mesh.num_faces() == 0)
+    fail("the density never exceeds the threshold ", request.threshold, " (", stats,
+         "): an untrained or collapsed model? try a lower --threshold");
+
+  if (request.colors) {  // the colour branch, looking along the vertex normal from outside
+    const auto normals = geometry::vertex_normals(summary.mesh.verts, summary.mesh.faces);
+    const auto rgb = session.color(prepared, summary.mesh.verts, -normals);
+    summary.mesh.colors = (rgb.clamp(0, 1) * 255).round().to(torch::kUInt8);
+  }
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+  fs::create_directories(out_dir);
+  char stem[160];
+  std::snprintf(stem, sizeof stem, "%s_frame%04d", human.name().c_str(), frame);
+  summary.ply = out_dir / (std::string(stem) + ".ply");
+  mesh::write_ply(summary.ply, summary.mesh,
+                  "TransHuman-C++ mesh of " + human.name() + " frame " + std::to_string(frame));
+
+  // Preview: from the view camera's direction and from its side, upright.
+  const auto& cam = human.camera(request.view);
+  const auto R = cam.R.to(torch::kFloat64);
+  const auto forward = R[2], down = R[1];
+  const auto side = torch::cross(down, forward, 0);
+  std::vector<cv::Mat> views;
+  for (const auto& dir : {forward, side}) {
+    const auto pc = mesh::frame_mesh(summary.mesh, dir, -down, 512, 512);
+    views.push_back(mesh::render_preview(summary.mesh, pc));
+  }
+  cv::Mat both;
+  cv::hconcat(views, both);
+  summary.preview = out_dir / (std::string(stem) + "_preview.png");
+  video::write_png(summary.preview, both);
+  spdlog::info("mesh: {} vertices, {} faces, {} of {} grid points evaluated, {:.1f} s -> {}",
+               summary.mesh.num_verts(), summary.mesh.num_faces(), summary.evaluated_points,
+               grid.depth * plane, summary.seconds, summary.ply.string());
+  return summary;
+}
+
+}  // namespace th::inference

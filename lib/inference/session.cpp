@@ -1,0 +1,129 @@
+#include "inference/session.hpp"
+
+#include <torch/torch.h>
+
+#include <algorithm>
+
+#include "body/smpl.hpp"
+#include "core/error.hpp"
+#include "data/rays.hpp"
+#include "train/trainer.hpp"
+
+namespace th::inference {
+namespace fs = std::filesystem;
+
+Session::Session(const Config& config, const torch::Device& device, const fs::path& checkpoint)
+    : config_(config), device_(device) {
+  const auto smpl = data::load_body_model(config.data);
+  dataset_ = std::make_shared<const data::Dataset>(config.data, config.eval.setting,
+                                                   data::Dataset::Mode::Test, smpl);
+  canonical_ = smpl->v_template.to(torch::kFloat32);
+  tokens_ = std::make_unique<train::Tokens>(config.model.grouping, smpl->v_template);
+  model_ = model::TransHuman(config.model, config.render.cull_distance);
+  train::load_weights(*model_, checkpoint);
+  model_->to(device);
+  model_->eval();
+}
+
+int Session::find_human(const std::string& name) const {
+  const auto& humans = dataset_->humans();
+  if (humans.empty()) fail("setting '", config_.eval.setting, "' has no people");
+  if (name.empty()) return 0;
+  std::string known;
+  for (size_t i = 0; i < humans.size(); ++i) {
+    if (humans[i]->name() == name) return int(i);
+    known += (i ? ", " : "") + humans[i]->name();
+  }
+  fail("no person '", name, "' in setting '", config_.eval.setting, "' (it has: ", known, ")");
+}
+
+const data::HumanSequence& Session::human(int index) const {
+  return *dataset_->humans().at(size_t(index));
+}
+
+std::vector<int> Session::setting_frames(int index) const {
+  std::vector<int> frames;
+  for (size_t i = 0; i < dataset_->size(); ++i) {
+    const auto& item = dataset_->item(i);
+    if (item.human == index && (frames.empty() || frames.back() != item.frame)) frames.push_back(item.frame);
+  }
+  return frames;
+}
+
+torch::Tensor Session::body_center(int human_index, int frame) const {
+  const auto& h = human(human_index);
+  if (frame < 0 || frame >= h.num_frames())
+    fail(h.name(), ": frame ", frame, " out of range [0, ", h.num_frames(), ")");
+  const auto b = dataset_->load_body(h, frame).bounds.to(torch::kFloat64);
+  return 0.5 * (b[0] + b[1]);
+}
+
+PreparedFrame Session::prepare(int human, int frame, int view) const {
+  torch::NoGradGuard no_grad;
+  PreparedFrame out;
+  out.human = human;
+  out.frame = frame;
+  out.sample = dataset_->load_item({human, frame, view}, 0);
+  out.inputs = train::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
+  out.cache = model_->prepare(out.inputs);
+  return out;
+}
+
+video::PathCamera Session::dataset_camera(const PreparedFrame& frame, int view) const {
+  const auto& h = human(frame.human);
+  if (view < 0 || view >= h.num_cameras())
+    fail(h.name(), ": camera ", view, " out of range [0, ", h.num_cameras(), ")");
+  const auto& cam = h.camera(view);  // float64, scaled as the reader scales it
+  auto K = cam.K.to(torch::kFloat64).clone();
+  K.slice(0, 0, 2) *= config_.data.ratio;
+  return {K, cam.R.to(torch::kFloat64), cam.T.to(torch::kFloat64).reshape({3, 1})};
+}
+
+torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
+                              int height) const {
+  torch::NoGradGuard no_grad;
+  const auto pixels = data::pixel_grid(width, height);
+  const auto rays = data::pixel_rays(pixels, camera.K, camera.R, camera.T);
+  const auto nf = data::near_far(rays.origins, rays.dirs, frame.sample.body.bounds.to(torch::kFloat64));
+  const auto valid = nf.valid;
+  auto f = [&](const torch::Tensor& t) { return t.index({valid}).to(device_, torch::kFloat32); };
+  const render::Rays r{f(rays.origins), f(rays.dirs), f(nf.near), f(nf.far)};
+  const auto vp = pixels.index({valid});
+  const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
+  if (r.size() == 0) return torch::zeros({height, width, 3}, torch::kFloat32);
+  const auto result = model::render_rays(*model_, frame.cache, r, config_.render);
+  return train::scatter_image(result.rgb.to(torch::kCPU, torch::kFloat32), flat, height, width);
+}
+
+torch::Tensor Session::density(const PreparedFrame& frame, const torch::Tensor& pts) const {
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "density: pts must be (N, 3), got ", pts.sizes());
+  torch::NoGradGuard no_grad;
+  auto out = torch::zeros({pts.size(0)}, torch::kFloat32);
+  const int64_t chunk = config_.render.chunk_points;
+  for (int64_t b = 0; b < pts.size(0); b += chunk) {
+    const auto p = pts.slice(0, b, std::min(pts.size(0), b + chunk)).to(device_, torch::kFloat32);
+    const auto kept = frame.cache.body->near(p).nonzero().flatten();
+    if (kept.size(0) == 0) continue;
+    const auto sigma = model_->density(frame.cache, p.index_select(0, kept));
+    out.slice(0, b, b + p.size(0)).index_put_({kept.cpu()}, sigma.to(torch::kCPU, torch::kFloat32));
+  }
+  return out;
+}
+
+torch::Tensor Session::color(const PreparedFrame& frame, const torch::Tensor& pts,
+                             const torch::Tensor& dirs) const {
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3 && dirs.sizes() == pts.sizes(),
+              "color: pts and dirs must be (N, 3), got ", pts.sizes(), " and ", dirs.sizes());
+  torch::NoGradGuard no_grad;
+  std::vector<torch::Tensor> parts;
+  const int64_t chunk = config_.render.chunk_points;
+  for (int64_t b = 0; b < pts.size(0); b += chunk) {
+    const int64_t e = std::min(pts.size(0), b + chunk);
+    const auto raw = model_->forward(frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32),
+                                     dirs.slice(0, b, e).to(device_, torch::kFloat32));
+    parts.push_back(torch::sigmoid(raw.slice(1, 0, 3)).to(torch::kCPU, torch::kFloat32));
+  }
+  return parts.empty() ? torch::zeros({0, 3}, torch::kFloat32) : torch::cat(parts);
+}
+
+}  // namespace th::inference

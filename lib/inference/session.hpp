@@ -1,0 +1,86 @@
+#pragma once
+// A trained model ready to be used outside the training loop (SPEC 7): the body model, a
+// dataset setting (its people, fixed reference views and cameras) and the network with its
+// weights. Prepares one frame of one person at a time and answers what free-viewpoint video
+// and mesh extraction ask of it: an image from any pinhole camera, densities, colours.
+
+#include <torch/types.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/config.hpp"
+#include "data/dataset.hpp"
+#include "model/frame_cache.hpp"
+#include "model/inputs.hpp"
+#include "model/transhuman.hpp"
+#include "train/pipeline.hpp"
+#include "video/camera_path.hpp"
+
+namespace th::inference {
+
+// One frame of one person, prepared: the reference images and body of the frame (in
+// `sample`, loaded as evaluation loads it), the network's inputs and its per-frame cache.
+struct PreparedFrame {
+  int human = 0;
+  int frame = 0;
+  data::Sample sample;
+  model::FrameInputs inputs;
+  model::FrameCache cache;
+};
+
+class Session {
+ public:
+  // Loads the body model, the setting config.eval.setting of config.data's split file (as
+  // transhuman-eval does: fixed reference views), the network and `checkpoint` (ours or the
+  // reference's). Throws th::Error naming what is missing.
+  Session(const Config& config, const torch::Device& device, const std::filesystem::path& checkpoint);
+
+  // Index of a person of the setting by folder name (empty: the setting's first). Throws
+  // th::Error listing the setting's people.
+  int find_human(const std::string& name) const;
+  const data::HumanSequence& human(int index) const;
+  // The frames of person `index` that the setting lists, in order.
+  std::vector<int> setting_frames(int index) const;
+
+  // Centre of the box of a frame's body (world, (3) float64): where the orbit looks.
+  torch::Tensor body_center(int human, int frame) const;
+
+  // Prepares frame `frame` (index into the person's annots) with the setting's reference
+  // views; `view` is the camera whose intrinsics and image size the output camera takes (SPEC
+  // 7: target view 3). Throws th::Error for an out-of-range index.
+  PreparedFrame prepare(int human, int frame, int view) const;
+
+  // Dataset camera `view` of the prepared frame's person at the working resolution: K scaled
+  // by data.ratio as the reader scales it, R, T (metres), float64.
+  video::PathCamera dataset_camera(const PreparedFrame& frame, int view) const;
+
+  // Renders `camera` at width x height as evaluation does (progressive rendering, culling,
+  // chunks of render.chunk_points, no autograd): (H, W, 3) float32 CPU RGB in [0, 1], black
+  // where no ray meets the frame's box.
+  torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
+                       int height) const;
+
+  // Raw density sigma_raw of world points (N, 3): 0 for points farther than
+  // render.cull_distance from the body (SPEC 7), the network elsewhere, in chunks of
+  // render.chunk_points. (N) float32 CPU.
+  torch::Tensor density(const PreparedFrame& frame, const torch::Tensor& pts) const;
+
+  // Colour (N, 3) in [0, 1] of world points seen along ray directions dirs (N, 3), chunked.
+  torch::Tensor color(const PreparedFrame& frame, const torch::Tensor& pts, const torch::Tensor& dirs) const;
+
+  const Config& config() const { return config_; }
+  const data::Dataset& dataset() const { return *dataset_; }
+
+ private:
+  Config config_;
+  torch::Device device_;
+  std::shared_ptr<const data::Dataset> dataset_;
+  torch::Tensor canonical_;
+  mutable std::unique_ptr<train::Tokens> tokens_;
+  mutable model::TransHuman model_{nullptr};  // evaluation only: the weights never change
+};
+
+}  // namespace th::inference
