@@ -55,10 +55,11 @@ std::vector<int> parse_frame_range(const std::string& text) {
 namespace {
 
 // What makes two runs' frames interchangeable; written to request.yaml.
-std::string describe(const VideoRequest& r, const std::string& human, const std::vector<int>& frames,
-                     int width, int height, int count) {
+std::string describe(const VideoRequest& r, const std::string& checkpoint, const std::string& human,
+                     const std::vector<int>& frames, int width, int height, int count) {
   YAML::Emitter y;
-  y << YAML::BeginMap << YAML::Key << "human" << YAML::Value << human;
+  y << YAML::BeginMap << YAML::Key << "checkpoint" << YAML::Value << checkpoint;
+  y << YAML::Key << "human" << YAML::Value << human;
   y << YAML::Key << "frames" << YAML::Value << YAML::Flow << frames;
   const char* kind = r.cameras == VideoRequest::Cameras::Orbit      ? "orbit"
                      : r.cameras == VideoRequest::Cameras::PathFile ? "path_file"
@@ -142,7 +143,8 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
   // Resume only what the same request wrote.
   fs::create_directories(out_dir);
   const fs::path frames_dir = out_dir / "frames", request_file = out_dir / "request.yaml";
-  const std::string wanted = describe(request, human.name(), frames, width, height, count);
+  const std::string wanted =
+      describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
   if (fs::exists(request_file) && read_text(request_file) != wanted) {
     if (!request.force)
       fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),

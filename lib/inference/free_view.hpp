@@ -4,7 +4,8 @@
 // the setting's fixed reference views. Cameras: the orbit of SPEC 7, a camera path file
 // (video/camera_path.hpp), or one dataset camera. Output: PNG frames, an mp4 at 30 fps, the
 // camera path as a file, a contact sheet. Resumable: frames already written are skipped, as
-// long as the request is the same one (request.yaml in the output folder says which).
+// long as the request (checkpoint included) is the same one (request.yaml in the output folder
+// says which).
 
 #include <filesystem>
 #include <string>

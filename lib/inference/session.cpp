@@ -13,7 +13,7 @@ namespace th::inference {
 namespace fs = std::filesystem;
 
 Session::Session(const Config& config, const torch::Device& device, const fs::path& checkpoint)
-    : config_(config), device_(device) {
+    : config_(config), device_(device), checkpoint_(fs::absolute(checkpoint)) {
   const auto smpl = data::load_body_model(config.data);
   dataset_ = std::make_shared<const data::Dataset>(config.data, config.eval.setting,
                                                    data::Dataset::Mode::Test, smpl);
@@ -23,6 +23,13 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   train::load_weights(*model_, checkpoint);
   model_->to(device);
   model_->eval();
+}
+
+std::string Session::checkpoint_id() const {
+  std::error_code ec;
+  const auto bytes = fs::file_size(checkpoint_, ec);
+  const auto modified = fs::last_write_time(checkpoint_, ec).time_since_epoch().count();
+  return checkpoint_.string() + " (" + std::to_string(bytes) + " bytes, modified " + std::to_string(modified) + ")";
 }
 
 int Session::find_human(const std::string& name) const {

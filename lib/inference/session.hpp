@@ -71,12 +71,16 @@ class Session {
   // Colour (N, 3) in [0, 1] of world points seen along ray directions dirs (N, 3), chunked.
   torch::Tensor color(const PreparedFrame& frame, const torch::Tensor& pts, const torch::Tensor& dirs) const;
 
+  // The checkpoint's path, size and modification time: which weights made a set of frames.
+  std::string checkpoint_id() const;
+
   const Config& config() const { return config_; }
   const data::Dataset& dataset() const { return *dataset_; }
 
  private:
   Config config_;
   torch::Device device_;
+  std::filesystem::path checkpoint_;
   std::shared_ptr<const data::Dataset> dataset_;
   torch::Tensor canonical_;
   mutable std::unique_ptr<train::Tokens> tokens_;

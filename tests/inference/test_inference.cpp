@@ -41,7 +41,7 @@ fs::path tiny_checkpoint() {
 
 }  // namespace
 
-TEST_CASE("frame ranges: F, BEGIN:END, BEGIN:END:STEP; errors quote the text", "[inference]") {
+TEST_CASE("frame ranges: F, BEGIN:END, BEGIN:END:STEP, errors quote the text", "[inference]") {
   using th::inference::parse_frame_range;
   CHECK(parse_frame_range("12") == std::vector<int>{12});
   CHECK(parse_frame_range("0:4") == std::vector<int>{0, 1, 2, 3});
@@ -73,7 +73,7 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   CHECK(image.max().item<float>() > 0);  // not an all-black comparison
 }
 
-TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet; resumed and guarded",
+TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, resumed and guarded",
           "[inference][video]") {
   const th::inference::Session session(tiny_config(), torch::kCPU, tiny_checkpoint());
   const fs::path out = th::test::scratch_dir("inference_orbit");
@@ -105,6 +105,13 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet; r
                     Catch::Contains("holds frames of another request") && Catch::Contains("--force"));
   request.force = true;
   CHECK(th::inference::render_video(session, request, out).rendered == 4);
+  // Other weights, same request: the frames are not theirs.
+  const fs::path other = th::test::scratch_dir("inference_other_ckpt") / "other.pt";
+  fs::copy_file(tiny_checkpoint(), other);
+  const th::inference::Session other_session(tiny_config(), torch::kCPU, other);
+  request.force = false;
+  CHECK_THROWS_WITH(th::inference::render_video(other_session, request, out),
+                    Catch::Contains("holds frames of another request"));
 
   // The saved path renders again as a path file: the same images.
   VideoRequest replay;

@@ -125,7 +125,7 @@ TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[model]
   }
 }
 
-TEST_CASE("pretrained ResNet-18 weights load from an npz; own weights round-trip", "[model][checkpoint]") {
+TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip", "[model][checkpoint]") {
   const auto dir = test::scratch_dir("checkpoint_own");
   TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());
   save_model_weights(*a, dir / "model.pt");
