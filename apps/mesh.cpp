@@ -3,7 +3,6 @@
 
 #include "app/app.hpp"
 #include "app/summary.hpp"
-#include "core/error.hpp"
 #include "inference/mesh_extraction.hpp"
 
 int main(int argc, char** argv) {
@@ -12,10 +11,9 @@ int main(int argc, char** argv) {
                  "over the frame's box, marching cubes, binary PLY and a preview PNG in --out."};
     th::app::CommonOptions options;
     th::inference::MeshRequest request;
-    std::string checkpoint, setting;
+    th::app::ModelOptions model;
     th::app::add_common_options(cli, options);
-    cli.add_option("--checkpoint", checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
-    cli.add_option("--setting", setting, "split setting whose people and reference views are used (default: eval.setting)");
+    th::app::add_model_options(cli, model);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first");
     cli.add_option("--voxel", request.voxel, "grid spacing in metres (SPEC 7: 0.005)")->check(CLI::PositiveNumber);
@@ -23,13 +21,12 @@ int main(int argc, char** argv) {
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
     cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)");
     CLI11_PARSE(cli, argc, argv);
-    if (!setting.empty()) options.overrides.push_back("eval.setting=" + setting);
-    if (!options.dry_run && checkpoint.empty()) th::fail("--checkpoint is required");
+    th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-mesh", "runs/mesh");
     th::app::print_summary(ctx);
     if (options.dry_run) return 0;
-    const th::inference::Session session(ctx.config, ctx.device, checkpoint);
+    const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     const auto s = th::inference::extract_mesh(session, request, ctx.run_dir);
     spdlog::info("mesh {} ({} vertices, {} faces), preview {}", s.ply.string(), s.mesh.num_verts(),
                  s.mesh.num_faces(), s.preview.string());

@@ -5,7 +5,6 @@
 
 #include "app/app.hpp"
 #include "app/summary.hpp"
-#include "core/error.hpp"
 #include "inference/free_view.hpp"
 
 int main(int argc, char** argv) {
@@ -16,10 +15,10 @@ int main(int argc, char** argv) {
                  "cameras.yaml and contact_sheet.png into --out; rerunning resumes."};
     th::app::CommonOptions options;
     th::inference::VideoRequest request;
-    std::string checkpoint, setting, frames;
+    th::app::ModelOptions model;
+    std::string frames;
     th::app::add_common_options(cli, options);
-    cli.add_option("--checkpoint", checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
-    cli.add_option("--setting", setting, "split setting whose people and reference views are used (default: eval.setting)");
+    th::app::add_model_options(cli, model);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frames", frames, "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
     auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)");
@@ -32,8 +31,7 @@ int main(int argc, char** argv) {
     cli.add_option("--height", request.height, "output height");
     cli.add_flag("--force", request.force, "replace frames of an earlier, different request in --out");
     CLI11_PARSE(cli, argc, argv);
-    if (!setting.empty()) options.overrides.push_back("eval.setting=" + setting);
-    if (!options.dry_run && checkpoint.empty()) th::fail("--checkpoint is required");
+    th::app::apply_model_options(model, options);
     if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;
     if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;
@@ -41,7 +39,7 @@ int main(int argc, char** argv) {
     const auto ctx = th::app::start_run(options, "transhuman-render", "runs/render");
     th::app::print_summary(ctx);
     if (options.dry_run) return 0;
-    const th::inference::Session session(ctx.config, ctx.device, checkpoint);
+    const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     const auto s = th::inference::render_video(session, request, ctx.run_dir);
     spdlog::info("{} frames ({} rendered, {} resumed), {:.2f} s/frame, in {}", s.frames, s.rendered,
                  s.skipped, s.seconds_per_frame, s.frames_dir.string());

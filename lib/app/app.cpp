@@ -24,6 +24,17 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
 }
 
+void add_model_options(CLI::App& cli, ModelOptions& m) {
+  cli.add_option("--checkpoint", m.checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
+  cli.add_option("--setting", m.setting,
+                 "split setting (pose, identity, one_shot, cross_dataset, fitting); default eval.setting");
+}
+
+void apply_model_options(const ModelOptions& m, CommonOptions& options) {
+  if (!m.setting.empty()) options.overrides.push_back("eval.setting=" + m.setting);
+  if (!options.dry_run && m.checkpoint.empty()) fail("--checkpoint is required");
+}
+
 RunContext start_run(const CommonOptions& o, const std::string& app_name,
                      const std::string& default_out) {
   logging::init_console(o.verbose);

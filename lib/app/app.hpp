@@ -29,6 +29,19 @@ struct CommonOptions {
 // key=value overrides on `cli`.
 void add_common_options(CLI::App& cli, CommonOptions& options);
 
+// What the commands that use a trained model share (eval, render, mesh): the checkpoint and
+// the split setting whose people and reference views they use.
+struct ModelOptions {
+  std::string checkpoint;  // ours (.pt) or the reference's (.pth)
+  std::string setting;     // overrides eval.setting when set
+};
+
+// Registers --checkpoint and --setting on `cli`.
+void add_model_options(CLI::App& cli, ModelOptions& model);
+// After parsing: turns --setting into an override and fails unless a checkpoint is named (a
+// dry run needs none).
+void apply_model_options(const ModelOptions& model, CommonOptions& options);
+
 struct RunContext {
   Config config;
   YAML::Node resolved;            // the config as a tree, every field included
