@@ -2,6 +2,8 @@
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <unistd.h>
+
 #include <fstream>
 
 #include "body/smpl.hpp"
@@ -29,10 +31,11 @@ th::Config tiny_config() {
        "train.val_views=0", "eval.setting=identity"});
 }
 
-// A checkpoint trained for two steps, made once per test run.
+// A checkpoint trained for two steps, made once per process (CTest runs the test cases as
+// parallel processes: each makes its own, in its own folder).
 fs::path tiny_checkpoint() {
   static const fs::path checkpoint = [] {
-    const fs::path run = th::test::scratch_dir("inference_ckpt");
+    const fs::path run = th::test::scratch_dir("inference_ckpt_" + std::to_string(::getpid()));
     th::train::train(tiny_config(), torch::kCPU, {run, false, 2});
     return run / "checkpoints" / "latest.pt";
   }();
