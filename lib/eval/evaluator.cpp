@@ -69,7 +69,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   model->to(device);
   model->eval();
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
-  const torch::Tensor canonical = smpl->v_template.to(torch::kFloat32);
+  const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
   train::Tokens tokens(config.model.grouping, smpl->v_template);
 
   size_t n = dataset->size();

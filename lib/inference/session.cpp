@@ -17,7 +17,7 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   const auto smpl = data::load_body_model(config.data);
   dataset_ = std::make_shared<const data::Dataset>(config.data, config.eval.setting,
                                                    data::Dataset::Mode::Test, smpl);
-  canonical_ = smpl->v_template.to(torch::kFloat32);
+  canonical_ = smpl->v_template;  // float64: token positions [parity]
   tokens_ = std::make_unique<train::Tokens>(config.model.grouping, smpl->v_template);
   model_ = model::TransHuman(config.model, config.render.cull_distance);
   train::load_weights(*model_, checkpoint);

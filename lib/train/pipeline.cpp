@@ -28,7 +28,7 @@ model::FrameInputs frame_inputs(const data::Sample& s, const torch::Tensor& cano
   in.Rh = f(s.body.Rh);
   in.Th = f(s.body.Th);
   in.A = f(s.body.A);
-  in.canonical = f(canonical);
+  in.canonical = canonical.to(device);  // dtype kept: float64 token positions [parity]
   in.visibility = s.visibility.to(device);
   in.labels = labels.to(device, torch::kInt64);
   in.num_tokens = labels.max().item<int64_t>() + 1;

@@ -28,7 +28,8 @@ class Tokens {
   torch::Tensor canonical_;
 };
 
-// Sample -> FrameInputs on `device` (float32).
+// Sample -> FrameInputs on `device` (float32, except `canonical`, passed on in its own dtype:
+// v_template in float64 gives the token positions of the reference [parity], SPEC 3.2).
 model::FrameInputs frame_inputs(const data::Sample& sample, const torch::Tensor& canonical,
                                 const torch::Tensor& labels, const torch::Device& device);
 

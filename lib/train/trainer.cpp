@@ -186,7 +186,7 @@ TrainSummary train(const Config& config, const torch::Device& device, const Trai
   std::shared_ptr<metrics::LpipsImpl> lpips;
   if (tc.lpips_weight > 0) lpips = metrics::try_load_lpips(tc.lpips_weights, device, "the perceptual loss");
 
-  const torch::Tensor canonical = smpl->v_template.to(torch::kFloat32);
+  const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
   Tokens tokens(config.model.grouping, smpl->v_template);
 
   CheckpointState st;

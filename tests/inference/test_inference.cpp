@@ -69,8 +69,10 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   model->eval();
   const auto smpl = th::data::load_body_model(config.data);
   th::train::Tokens tokens(config.model.grouping, smpl->v_template);
-  const auto inputs = th::train::frame_inputs(s, smpl->v_template.to(torch::kFloat32),
+  const auto inputs = th::train::frame_inputs(s, smpl->v_template,
                                               tokens.labels(s.body), torch::kCPU);
+  // Token positions come from v_template in float64, as the reference's do (SPEC 3.2 [parity]).
+  CHECK(prepared.inputs.canonical.scalar_type() == torch::kDouble);
   const auto expected = th::train::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
   CHECK(torch::equal(image, expected.pred));
   CHECK(image.max().item<float>() > 0);  // not an all-black comparison

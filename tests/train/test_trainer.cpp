@@ -131,7 +131,7 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
   const fs::path dir = th::test::scratch_dir("train_collapse");
   th::train::JsonlWriter log(dir / "metrics.jsonl");
   spdlog::default_logger()->sinks().push_back(sink);
-  th::train::validate(*model, c, val, tokens, smpl->v_template.to(torch::kFloat32), torch::kCPU,
+  th::train::validate(*model, c, val, tokens, smpl->v_template, torch::kCPU,
                       dir, 1, log, 0);
   spdlog::default_logger()->sinks().pop_back();
   CHECK_THAT(captured.str(), Catch::Contains("collapsed") && Catch::Contains("Try:"));
