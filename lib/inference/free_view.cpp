@@ -5,11 +5,11 @@
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
-#include <fstream>
 #include <sstream>
 
 #include "core/error.hpp"
 #include "core/progress.hpp"
+#include "io/bytes.hpp"
 #include "video/contact_sheet.hpp"
 #include "video/frame_writer.hpp"
 
@@ -72,13 +72,6 @@ std::string describe(const VideoRequest& r, const std::string& checkpoint, const
   y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value << height;
   y << YAML::Key << "video_frames" << YAML::Value << count << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
-}
-
-std::string read_text(const fs::path& file) {
-  std::ifstream in(file);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 }  // namespace
@@ -145,13 +138,13 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
   const fs::path frames_dir = out_dir / "frames", request_file = out_dir / "request.yaml";
   const std::string wanted =
       describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
-  if (fs::exists(request_file) && read_text(request_file) != wanted) {
+  if (fs::exists(request_file) && io::detail::read_file(request_file) != wanted) {
     if (!request.force)
       fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
            "); use another --out or --force to replace them");
     fs::remove_all(frames_dir);
   }
-  std::ofstream(request_file) << wanted;
+  io::detail::write_file_atomic(request_file, wanted);
   video::write_camera_path(out_dir / "cameras.yaml", {shots, width, height});
 
   video::FrameWriterOptions wo;
