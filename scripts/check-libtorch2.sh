@@ -122,8 +122,11 @@ log "Debian 13 libtorch-dev $version, python3-torch $py_version"
 ((root_only)) && exit 0
 
 step=$(date +%s)
-generator=()
-if in_root sh -c 'command -v ninja' >/dev/null; then generator=(-G Ninja); fi
+generator=() keep_going=()
+if in_root sh -c 'command -v ninja' >/dev/null; then
+  generator=(-G Ninja)
+  keep_going=(-- -k 0)  # every compile error at once, not just the first
+fi
 configure_log=$root/tmp/transhuman-configure.log
 if ! in_root cmake -S "$inside" -B "$inside/$build_dir" "${generator[@]}" \
   -DCMAKE_BUILD_TYPE=Release >"$configure_log" 2>&1; then
@@ -131,7 +134,7 @@ if ! in_root cmake -S "$inside" -B "$inside/$build_dir" "${generator[@]}" \
   die "configuring failed"
 fi
 grep "LibTorch" "$configure_log" || true
-in_root cmake --build "$inside/$build_dir" -j "$jobs"
+in_root cmake --build "$inside/$build_dir" -j "$jobs" "${keep_going[@]}"
 log "built in $(($(date +%s) - step)) s"
 
 step=$(date +%s)
