@@ -106,7 +106,8 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
       std::memcpy(tensor.data_ptr(), data.get(), size);
       if (swap_bytes && itemsize > 1) {
         auto* bytes = static_cast<char*>(tensor.data_ptr());
-        for (int64_t i = 0; i < numel; ++i) std::reverse(bytes + i * itemsize, bytes + (i + 1) * itemsize);
+        for (int64_t i = 0; i < numel; ++i)
+          std::reverse(bytes + i * itemsize, bytes + (i + 1) * itemsize);
       }
       it = storages.emplace(key, tensor).first;
     }
@@ -131,7 +132,9 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   ext.globals["torch._utils._rebuild_tensor"] = rebuild;
   ext.globals["torch._utils._rebuild_parameter"] = [](const Value::List& a) { return a.at(0); };
   // A Parameter with Python attributes (2.x): (data, requires_grad, hooks, state).
-  ext.globals["torch._utils._rebuild_parameter_with_state"] = [](const Value::List& a) { return a.at(0); };
+  ext.globals["torch._utils._rebuild_parameter_with_state"] = [](const Value::List& a) {
+    return a.at(0);
+  };
   ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
   for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
                         "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",

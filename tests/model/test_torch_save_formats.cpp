@@ -1,9 +1,9 @@
 // Checkpoints written by the installed Python torch's own torch.save (Debian 12's 1.13, Debian
 // 13's 2.6 in scripts/check-libtorch2.sh's root): every storage dtype, views, a module's state
 // dict, both archive namings, and a big-endian copy (tests/python/torch_save_formats.py).
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 #include <iterator>
 #include <string>
@@ -64,16 +64,16 @@ void check_contents(const std::map<std::string, torch::Tensor>& sd) {
     CHECK(t.sizes() == expected.sizes());
     CHECK(torch::equal(t, expected));
   }
-  CHECK(torch::equal(sd.at("view.transposed"),
-                     torch::arange(24, torch::kFloat).reshape({4, 6}).t()));
+  CHECK(
+      torch::equal(sd.at("view.transposed"), torch::arange(24, torch::kFloat).reshape({4, 6}).t()));
   const auto base = torch::arange(30, torch::kDouble) * 0.25;
   CHECK(torch::equal(sd.at("view.slice_a"), base.slice(0, 5, 17).reshape({3, 4})));
   CHECK(torch::equal(sd.at("view.slice_b"), base.slice(0, 20, 26, 2)));
   CHECK(sd.at("scalar").dim() == 0);
   CHECK(sd.at("scalar").item<float>() == 2.5f);
   CHECK(sd.at("empty").sizes() == torch::IntArrayRef({0, 3}));
-  CHECK(torch::equal(sd.at("module.0.weight"),
-                     torch::arange(6, torch::kFloat).reshape({2, 3}) - 2));
+  CHECK(
+      torch::equal(sd.at("module.0.weight"), torch::arange(6, torch::kFloat).reshape({2, 3}) - 2));
   CHECK(torch::equal(sd.at("module.0.bias"), torch::tensor({0.5f, -0.5f})));
   CHECK(torch::equal(sd.at("module.1.running_var"), torch::ones({2})));
   CHECK(sd.at("module.1.num_batches_tracked").scalar_type() == torch::kLong);
@@ -92,7 +92,8 @@ TEST_CASE("torch.save checkpoints of the installed torch import with every dtype
   INFO("written by torch " << version);
   if (version.rfind("1.", 0) != 0) {
     // PyTorch 2.x's layout: the fixture has its new records (the reader passes over them).
-    const std::string records((std::istreambuf_iterator<char>(layout)), std::istreambuf_iterator<char>());
+    const std::string records((std::istreambuf_iterator<char>(layout)),
+                              std::istreambuf_iterator<char>());
     CHECK(records.find("byteorder\n") != std::string::npos);
     CHECK(records.find(".data/serialization_id\n") != std::string::npos);
   }
@@ -107,7 +108,8 @@ TEST_CASE("torch.save checkpoints of the installed torch import with every dtype
   CHECK_FALSE(all.count("meta.torch"));
 }
 
-TEST_CASE("a big-endian torch.save checkpoint imports byte-swapped", "[model][checkpoint][python]") {
+TEST_CASE("a big-endian torch.save checkpoint imports byte-swapped",
+          "[model][checkpoint][python]") {
   check_contents(read_torch_state_dict(fixtures() / "every_dtype_big.pth", "net"));
   CHECK_THROWS_WITH(read_torch_state_dict(fixtures() / "bad_byteorder.pth", "net"),
                     Catch::Contains("byteorder") && Catch::Contains("middle"));
