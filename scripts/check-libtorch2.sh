@@ -3,12 +3,16 @@
 # Debian 13 (trixie) root made with debootstrap on a Debian 12 host. Run as root:
 #   bash scripts/check-libtorch2.sh            make or reuse the root, build, run CTest
 #   bash scripts/check-libtorch2.sh --root-only  make or update the root only
+#   bash scripts/check-libtorch2.sh TARGET...    build only these targets (a quicker partial
+#                                                check; TH_CTEST_ARGS='-R test_model' then
+#                                                picks the tests to run)
 # Idempotent: the root is made once and reused (packages are only installed when missing), the
 # build folder (build-libtorch2/ in the repository) is reused too. Not part of .ci/run (the
 # first run downloads and installs about 1.5 GB).
 #   TH_TRIXIE_ROOT   where the root lives (default /var/cache/transhuman/trixie-root)
 #   TH_DEBIAN_MIRROR the Debian mirror (default: the host's apt sources' one for its release)
 #   TH_JOBS          parallel build and test jobs (default: nproc)
+#   TH_CTEST_ARGS    more ctest arguments (e.g. -R test_model)
 set -euo pipefail
 
 repo=$(cd "$(dirname "$0")/.." && pwd)
@@ -25,11 +29,14 @@ die() {
 }
 
 root_only=0
-case "${1:-}" in
-  "") ;;
-  --root-only) root_only=1 ;;
-  *) die "unknown option '$1' (only --root-only)" ;;
-esac
+targets=()
+for arg in "$@"; do
+  case "$arg" in
+    --root-only) root_only=1 ;;
+    -*) die "unknown option '$arg' (only --root-only)" ;;
+    *) targets+=(--target "$arg") ;;
+  esac
+done
 [[ $(id -u) -eq 0 ]] || die "run as root (debootstrap, chroot and mounts need it)"
 
 # The mirror that the host's apt sources use for the host's own release (deb822 .sources files
@@ -134,13 +141,13 @@ if ! in_root cmake -S "$inside" -B "$inside/$build_dir" "${generator[@]}" \
   die "configuring failed"
 fi
 grep "LibTorch" "$configure_log" || true
-in_root cmake --build "$inside/$build_dir" -j "$jobs" "${keep_going[@]}"
+in_root cmake --build "$inside/$build_dir" -j "$jobs" "${targets[@]}" "${keep_going[@]}"
 log "built in $(($(date +%s) - step)) s"
 
 step=$(date +%s)
 status=0
-in_root sh -c "cd '$inside/$build_dir' && OMP_NUM_THREADS=1 ctest -j '$jobs' --output-on-failure" \
-  || status=$?
+in_root sh -c "cd '$inside/$build_dir' && OMP_NUM_THREADS=1 ctest -j '$jobs' --output-on-failure \
+  --timeout 900 ${TH_CTEST_ARGS:-}" || status=$?
 log "tests ran in $(($(date +%s) - step)) s (exit $status)"
 log "tested LibTorch $version (Debian 13 libtorch-dev; Python torch $py_version)"
 log "all in $(($(date +%s) - start)) s"
