@@ -15,8 +15,9 @@ int main(int argc, char** argv) {
     int limit = -1;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
+    th::app::add_force_option(cli, options);
     cli.add_option("--limit", limit, "evaluate only the first N images (quick look)");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (limit >= 0) options.overrides.push_back("eval.limit=" + std::to_string(limit));
     th::app::apply_model_options(model, options);
 

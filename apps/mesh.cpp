@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
     cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density (SPEC 7: 20)");
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
     cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-mesh", "runs/mesh");

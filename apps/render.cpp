@@ -30,7 +30,7 @@ int main(int argc, char** argv) {
     cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)");
     cli.add_option("--height", request.height, "output height");
     cli.add_flag("--force", request.force, "replace frames of an earlier, different request in --out");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
     if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;

@@ -55,11 +55,11 @@ for row in "${rows[@]}"; do
   if [[ -f $run/checkpoints/latest.pt && ! -f $run/train_done ]]; then
     "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" --resume "${overrides[@]}"
   elif [[ ! -f $run/train_done ]]; then
-    "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" "${overrides[@]}"
+    "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" --force "${overrides[@]}"
   fi
   echo $((SECONDS - start)) > "$run/train_done"
   "$bin/transhuman-eval" --config "configs/ablations/$row.yaml" --checkpoint "$run/checkpoints/latest.pt" \
-    --out "$run/eval_$setting" --setting "$setting" "${overrides[@]}"
+    --out "$run/eval_$setting" --setting "$setting" --force "${overrides[@]}"
 done
 
 # The table, in the paper's format (one row per configuration, PSNR / SSIM / LPIPS).
