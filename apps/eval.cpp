@@ -16,7 +16,8 @@ int main(int argc, char** argv) {
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
     th::app::add_force_option(cli, options);
-    cli.add_option("--limit", limit, "evaluate only the first N images (quick look)");
+    cli.add_option("--limit", limit, "evaluate only the first N images (quick look)")
+        ->check(th::app::at_least(0));
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (limit >= 0) options.overrides.push_back("eval.limit=" + std::to_string(limit));
     th::app::apply_model_options(model, options);

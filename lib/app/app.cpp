@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <iostream>
 #include <map>
 
@@ -23,6 +24,35 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
   cli.add_flag("--dry-run", o.dry_run, "build everything the config names, print a summary, exit");
   cli.add_flag("-v,--verbose", o.verbose, "debug logging");
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
+}
+
+namespace {
+
+// A CLI11 check of a number: `ok` decides, `requirement` is what the message says it must be.
+CLI::Validator number_check(std::function<bool(double)> ok, const std::string& requirement) {
+  return CLI::Validator(
+      [ok, requirement](std::string& text) -> std::string {
+        try {
+          size_t used = 0;
+          const double v = std::stod(text, &used);
+          if (used == text.size()) return ok(v) ? "" : "must be " + requirement + ", not " + text;
+        } catch (const std::exception&) {
+        }
+        return "'" + text + "' is not a number";
+      },
+      "NUMBER " + requirement);
+}
+
+}  // namespace
+
+CLI::Validator finite_number() {
+  return number_check([](double v) { return std::isfinite(v); }, "finite");
+}
+CLI::Validator at_least(double min) {
+  return number_check([min](double v) { return v >= min; }, ">= " + CLI::detail::to_string(min));
+}
+CLI::Validator above(double bound) {
+  return number_check([bound](double v) { return v > bound; }, "> " + CLI::detail::to_string(bound));
 }
 
 void add_force_option(CLI::App& cli, CommonOptions& o) {

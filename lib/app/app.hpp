@@ -35,6 +35,12 @@ struct CommonOptions {
 // key=value overrides on `cli`.
 void add_common_options(CLI::App& cli, CommonOptions& options);
 
+// A CLI11 check: the value is a finite number (not nan or inf).
+CLI::Validator finite_number();
+// A CLI11 check: the value is a number >= `min` (the message quotes the bound, not a range).
+CLI::Validator at_least(double min);
+CLI::Validator above(double bound);  // a number > bound
+
 // Registers --force on `cli` and turns on the --out guard (training and evaluation).
 void add_force_option(CLI::App& cli, CommonOptions& options);
 

@@ -48,6 +48,20 @@ if "$apps/transhuman-train" --dry-run --force --out "$scratch/used" "${tiny[@]}"
 else
   echo "FAIL: --force"; failures=$((failures + 1))
 fi
+# Values are checked, never replaced by a default.
+expect 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
+expect 2 "--width" "$apps/transhuman-render" --width -10
+expect 2 "--frame" "$apps/transhuman-mesh" --frame -1
+expect 2 "must be finite, not nan" "$apps/transhuman-mesh" --threshold nan
+expect 2 "--limit" "$apps/transhuman-eval" --limit -5
+expect 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
+: > "$scratch/empty.yaml"
+expect 2 "is empty" "$apps/transhuman-train" --dry-run --config "$scratch/empty.yaml"
+printf 'parent: %s\ntrain:\n  lr:\n' "$PWD/configs/default.yaml" > "$scratch/null.yaml"
+expect 2 "'train.lr' has no value" "$apps/transhuman-train" --dry-run --config "$scratch/null.yaml"
+printf 'parent: %s\nseed: 1\nseed: 2\n' "$PWD/configs/default.yaml" > "$scratch/twice.yaml"
+expect 2 "'seed' appears twice" "$apps/transhuman-train" --dry-run --config "$scratch/twice.yaml"
+expect 2 "is a folder" "$apps/transhuman-train" --dry-run --config "$scratch"
 if "$apps/transhuman-train" --help >/dev/null; then echo "ok: --help exits 0"; else echo "FAIL: --help"; failures=$((failures + 1)); fi
 echo "$failures failed"
 exit $((failures > 0))
