@@ -159,12 +159,15 @@ int guarded_main(const std::string& app_name, const std::function<int()>& body) 
     return body();
   } catch (const Error& e) {
     std::cerr << app_name << ": error: " << e.what() << std::endl;
+    logging::error_to_files(std::string("error: ") + e.what());
     return 2;
   } catch (const c10::Error& e) {
     std::cerr << app_name << ": internal error: " << e.what_without_backtrace() << std::endl;
+    logging::error_to_files(std::string("internal error: ") + e.what_without_backtrace());
     return 3;
   } catch (const std::exception& e) {
     std::cerr << app_name << ": internal error: " << e.what() << std::endl;
+    logging::error_to_files(std::string("internal error: ") + e.what());
     return 3;
   }
 }

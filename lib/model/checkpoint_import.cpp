@@ -3,9 +3,12 @@
 #include <caffe2/serialize/inline_container.h>
 #include <torch/torch.h>
 
+#include <sstream>
+
 #include <unordered_map>
 
 #include "core/error.hpp"
+#include "io/bytes.hpp"
 #include "io/npy.hpp"
 #include "io/pickle.hpp"
 #include "model/transhuman.hpp"
@@ -178,7 +181,9 @@ void save_model_weights(const TransHumanImpl& model, const std::filesystem::path
   torch::serialize::OutputArchive archive;
   for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
   for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
-  archive.save_to(path.string());
+  std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
+  archive.save_to(bytes);
+  io::detail::write_file_atomic(path, bytes.str());
 }
 
 void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path) {
