@@ -40,9 +40,16 @@ function(th_test name)
     message(STATUS "${name}: no tests yet, skipped")
     return()
   endif()
-  add_executable(${name} ${sources} ${PROJECT_SOURCE_DIR}/tests/support/catch_main.cpp)
+  if(TARGET Catch2::Catch2WithMain)
+    # Catch2 3 (Debian 13): its own main, and the Catch2 2 header the tests include as a shim.
+    add_executable(${name} ${sources})
+    target_include_directories(${name} BEFORE PRIVATE ${PROJECT_SOURCE_DIR}/tests/support/catch2_v3)
+    target_link_libraries(${name} PRIVATE Catch2::Catch2WithMain ${ARG_DEPS})
+  else()
+    add_executable(${name} ${sources} ${PROJECT_SOURCE_DIR}/tests/support/catch_main.cpp)
+    target_link_libraries(${name} PRIVATE Catch2::Catch2 ${ARG_DEPS})
+  endif()
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests)
-  target_link_libraries(${name} PRIVATE Catch2::Catch2 ${ARG_DEPS})
   th_use_pch(${name})
   catch_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}

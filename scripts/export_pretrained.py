@@ -29,7 +29,7 @@ def main():
 
     model = torchvision.models.resnet18()
     if args.weights:
-        state = torch.load(args.weights, map_location="cpu")
+        state = torch.load(args.weights, map_location="cpu", weights_only=True)
         if isinstance(state, dict) and "state_dict" in state:
             state = state["state_dict"]
         missing, unexpected = model.load_state_dict(state, strict=False)

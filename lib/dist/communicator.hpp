@@ -6,7 +6,6 @@
 // Every collective is bounded by the timeout: a rank that dies or hangs makes the others throw
 // th::Error (naming the operation and the timeout) instead of waiting forever.
 
-#include <torch/csrc/distributed/c10d/ProcessGroup.hpp>
 #include <torch/csrc/distributed/c10d/Store.hpp>
 #include <torch/types.h>
 
@@ -15,6 +14,8 @@
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "core/torch_compat.hpp"
 
 namespace th::dist {
 
@@ -92,7 +93,7 @@ class Communicator {
   double timeout_s_;
   int64_t bucket_bytes_;
   c10::intrusive_ptr<c10d::Store> store_;
-  c10::intrusive_ptr<c10d::ProcessGroup> group_;
+  c10::intrusive_ptr<compat::CollectiveGroup> group_;  // Gloo or NCCL
   bool failed_ = false;     // after a failed collective the group is left alone (not torn down)
   int64_t lead_calls_ = 0;  // on_lead sequence number (store keys)
   double allreduce_total_ = 0, allreduce_last_ = 0;

@@ -3,8 +3,8 @@
 #include <caffe2/serialize/inline_container.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <sstream>
-
 #include <unordered_map>
 
 #include "core/error.hpp"
@@ -25,6 +25,7 @@ torch::ScalarType storage_dtype(const std::string& cls, const std::string& sourc
       {"torch.LongStorage", torch::kLong},     {"torch.IntStorage", torch::kInt},
       {"torch.ShortStorage", torch::kShort},   {"torch.CharStorage", torch::kChar},
       {"torch.ByteStorage", torch::kByte},     {"torch.BoolStorage", torch::kBool},
+      {"torch.UntypedStorage", torch::kByte},  // a bare storage (2.x); numel counts bytes
   };
   const auto it = types.find(cls);
   if (it == types.end()) fail(source, ": unsupported storage type '", cls, "'");
@@ -74,6 +75,17 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   if (!reader->hasRecord("data.pkl")) fail(source, ": no data.pkl record (not a torch.save file)");
   const auto [pkl, pkl_size] = reader->getRecord("data.pkl");
   std::map<std::string, torch::Tensor> storages;
+  // The byte order of the storages: a 'byteorder' record ("little" or "big"; PyTorch 2.x writes
+  // one, Debian 12's 1.13 does not); files without one are little-endian.
+  bool swap_bytes = false;
+  if (reader->hasRecord("byteorder")) {
+    const auto [order_data, order_size] = reader->getRecord("byteorder");
+    const std::string order(static_cast<const char*>(order_data.get()), order_size);
+    if (order != "little" && order != "big")
+      fail(source, ": unknown byteorder record '", order, "' (expected little or big)");
+    constexpr bool host_big = __BYTE_ORDER__ == __ORDER_BIG_ENDIAN__;
+    swap_bytes = (order == "big") != host_big;
+  }
 
   io::PickleExtensions ext;
   ext.ignore_dict_state = true;  // OrderedDict._metadata of state dicts
@@ -94,6 +106,11 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
         fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel * itemsize);
       auto tensor = torch::empty({numel}, dtype);
       std::memcpy(tensor.data_ptr(), data.get(), size);
+      if (swap_bytes && itemsize > 1) {
+        auto* bytes = static_cast<char*>(tensor.data_ptr());
+        for (int64_t i = 0; i < numel; ++i)
+          std::reverse(bytes + i * itemsize, bytes + (i + 1) * itemsize);
+      }
       it = storages.emplace(key, tensor).first;
     }
     return Value::array(it->second);
@@ -116,9 +133,14 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   ext.globals["torch._utils._rebuild_tensor_v2"] = rebuild;
   ext.globals["torch._utils._rebuild_tensor"] = rebuild;
   ext.globals["torch._utils._rebuild_parameter"] = [](const Value::List& a) { return a.at(0); };
+  // A Parameter with Python attributes (2.x): (data, requires_grad, hooks, state).
+  ext.globals["torch._utils._rebuild_parameter_with_state"] = [](const Value::List& a) {
+    return a.at(0);
+  };
   ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
   for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
-                        "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage"})
+                        "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
+                        "UntypedStorage"})
     ext.globals[std::string("torch.") + s] = nullptr;
 
   const Value root = io::parse_pickle(std::string_view(static_cast<const char*>(pkl.get()), pkl_size),

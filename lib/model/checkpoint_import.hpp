@@ -17,10 +17,13 @@ class EncoderImpl;
 
 // The tensors of a PyTorch zip checkpoint. The pickle is read by the project's safe reader
 // (io/pickle.hpp) with PyTorch's storages (persistent ids), torch._utils._rebuild_tensor_v2,
-// collections.OrderedDict/Counter; nothing is executed. `entry`: the dict key holding the state
-// dict ("net" for the reference's checkpoints); a file holding the state dict itself works too.
-// Nested dicts are flattened with '.' like a state dict (numbers become 0-d tensors). Throws
-// th::Error naming the file.
+// collections.OrderedDict/Counter; nothing is executed. Files of PyTorch 1.x and 2.x alike:
+// storages of every dtype torch.save writes for the usual tensors (float16/bfloat16/32/64,
+// int8/16/32/64, uint8, bool), a 'byteorder' record saying big (storages are byte-swapped), and
+// other records (.data/serialization_id, version) that do not matter here. `entry`: the dict
+// key holding the state dict ("net" for the reference's checkpoints); a file holding the state
+// dict itself works too. Nested dicts are flattened with '.' like a state dict (numbers become
+// 0-d tensors). Throws th::Error naming the file.
 std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
                                                           const std::string& entry = "net");
 

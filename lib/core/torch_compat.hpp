@@ -1,0 +1,25 @@
+#pragma once
+// The one place where the sources look at the LibTorch version: Debian 12's 1.13 and 2.x
+// (Debian 13's 2.6, the official archives, the LibTorch inside a PyTorch installation) build
+// from the same code through the names below. Nothing else tests TORCH_VERSION_*.
+
+#include <torch/version.h>
+
+#if TORCH_VERSION_MAJOR >= 2
+#include <torch/csrc/distributed/c10d/Backend.hpp>
+#else
+#include <torch/csrc/distributed/c10d/ProcessGroup.hpp>
+#endif
+
+namespace th::compat {
+
+// What a c10d collective runs on. In 1.13 ProcessGroupGloo and ProcessGroupNCCL are
+// c10d::ProcessGroups; from 2.0 on they are c10d::Backends (a ProcessGroup became a dispatcher
+// over Backends), with the same broadcast/allreduce/barrier calls.
+#if TORCH_VERSION_MAJOR >= 2
+using CollectiveGroup = c10d::Backend;
+#else
+using CollectiveGroup = c10d::ProcessGroup;
+#endif
+
+}  // namespace th::compat
