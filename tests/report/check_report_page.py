@@ -11,7 +11,8 @@ then loads it in Chromium and checks:
     file inside the report folder; nothing on the page points outside the folder or online;
   - a screenshot of the 3D viewer is not blank: unlit, most mesh pixels carry the colours of
     the .ply's vertices (and their mean matches); lit, the mesh covers part of the canvas.
-Also checks the evaluator's own page (index.html beside its outputs). Screenshots of the page
+Also checks the evaluator's own page (index.html beside its outputs) and an ablation page of two
+rows (the first epoch's checkpoint against the last). Screenshots of the pages
 and the viewer are left in --work/shots. Exits 77 (CTest's skip code) without Chromium.
 Standard library only.
 """
@@ -110,11 +111,16 @@ class Dom(html.parser.HTMLParser):
         super().__init__()
         self.body, self.cells, self.cards, self.refs = {}, {}, [], []
         self.errors, self._cell, self._in_errors = '', None, False
+        self.paired, self._row, self._tds = [], None, []
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
         if tag == 'body':
             self.body = a
+        if tag == 'tr' and 'data-row' in a:
+            self._row, self._tds = a['data-row'], []
+        if tag == 'td' and self._row is not None:
+            self._tds.append('')
         if tag == 'td' and 'data-key' in a:
             self._cell = a['data-key']
             self.cells[self._cell] = ''
@@ -130,10 +136,15 @@ class Dom(html.parser.HTMLParser):
     def handle_endtag(self, tag):
         if tag == 'td':
             self._cell = None
+        if tag == 'tr' and self._row is not None:
+            self.paired.append((self._row, self._tds[1] if len(self._tds) > 1 else None))
+            self._row = None
         if tag == 'pre':
             self._in_errors = False
 
     def handle_data(self, data):
+        if self._row is not None and self._tds:
+            self._tds[-1] += data
         if self._cell:
             self.cells[self._cell] += data
         if self._in_errors:
@@ -266,6 +277,20 @@ def main():
     lit = sum(max(abs(p[i] - BACKGROUND[i]) for i in range(3)) > 24 for p in pixels) / len(pixels)
     check(lit > 0.02, f'viewer (lit): the mesh covers {100 * lit:.1f}% of the canvas (> 2%)')
     chromium(browser, url, ['--window-size=1280,2400', f'--screenshot={os.path.join(shots, "page.png")}'])
+
+    # An ablation page of two rows: the final checkpoint as `full`, the first epoch's as `early`.
+    abl = os.path.join(args.work, 'ablations')
+    shutil.copytree(eval_dir, os.path.join(abl, 'full', 'eval_identity'))
+    first = sorted(glob.glob(os.path.join(run_dir, 'checkpoints', 'epoch_*.pt')))[0]
+    run([f'{b}/transhuman-eval', *cfg, '--checkpoint', first, '--out', os.path.join(abl, 'early', 'eval_identity'),
+         '--setting', 'identity', '--limit', '4', *data])
+    run([f'{b}/transhuman-report', 'ablations', '--root', abl, '--setting', 'identity', 'full', 'early'])
+    adom, _ = load_page(browser, os.path.join(abl, 'index.html'), 'ablation page')
+    early = json.load(open(os.path.join(abl, 'early', 'eval_identity', 'summary.json')))
+    check(adom.cells.get('psnr', '').endswith(f'{early["psnr"]:.2f}'), 'ablation page: the last row\'s PSNR equals its summary.json')
+    check(adom.paired == [('early', str(early['images']))], f'ablation page: one paired row over every image {adom.paired}')
+    chromium(browser, 'file://' + os.path.abspath(os.path.join(abl, 'index.html')),
+             ['--window-size=1280,1100', f'--screenshot={os.path.join(shots, "ablations.png")}'])
 
     size = sum(os.path.getsize(os.path.join(d, f)) for d, _, fs in os.walk(report) for f in fs)
     print(f'demo page: folder {size / 1024:.0f} KiB, index.html {os.path.getsize(os.path.join(report, "index.html")) / 1024:.0f} KiB; '
