@@ -145,7 +145,7 @@ std::string eval_js(const fs::path& eval, const fs::path& out, const std::string
   const std::string csv = read_text(eval / "per_image.csv", "per-image scores");
   std::string panels = "[";
   for (const CsvRow& r : csv_rows(csv, eval / "per_image.csv")) {
-    const fs::path panel = eval / "images" / eval::panel_file_name(r.human, r.frame, r.view);
+    const fs::path panel = eval / "images" / th::eval::panel_file_name(r.human, r.frame, r.view);
     panels += panels.size() > 1 ? "," : "";
     panels += fs::exists(panel) ? js_string(href(bring_in(panel, out, fs::path(copy_name) / "images" /
                                                           panel.filename()), out))
@@ -269,7 +269,7 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   evals += "]";
   const fs::path config = sources.evals.front() / "config.yaml";
   std::string data = "{" + common_js("eval", fs::exists(config) ? read_text(config, "config") : "") + ",evals:" + evals;
-  if (!sources.metrics.empty() && fs::exists(sources.metrics))
+  if (!sources.metrics.empty())
     data += ",metrics:" + js_string(read_text(sources.metrics, "training metrics"));
 
   if (!sources.orbit.empty() && fs::exists(sources.orbit / "frames")) {
