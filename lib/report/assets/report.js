@@ -226,12 +226,15 @@
     const materials = { lit: new THREE.MeshLambertMaterial(base), flat: new THREE.MeshBasicMaterial(base) };
     const object = new THREE.Mesh(geometry, lit.checked ? materials.lit : materials.flat);
     scene.add(object);
-    scene.add(new THREE.AmbientLight(0xffffff, 0.55));
+    scene.add(new THREE.AmbientLight(0xffffff, 0.45));
     const radius = size.length() / 2;
     const camera = new THREE.PerspectiveCamera(35, 1, radius / 100, radius * 100);
     camera.up.copy(up);
-    const headlight = new THREE.DirectionalLight(0xffffff, 0.6);
-    camera.add(headlight);
+    // A key light that moves with the camera: from its upper left, shining along its view.
+    const key = new THREE.DirectionalLight(0xffffff, 0.75);
+    key.position.set(-0.6, 0.8, 0);
+    key.target.position.set(0, 0, -1);
+    camera.add(key, key.target);
     scene.add(camera);
     // Start level, 3.2 radii away, along the thinner horizontal axis: facing the body's wide side.
     const side = ['x', 'y', 'z'].map((a) => new THREE.Vector3(a === 'x' ? 1 : 0, a === 'y' ? 1 : 0, a === 'z' ? 1 : 0))
