@@ -6,6 +6,7 @@
 #include "app/app.hpp"
 #include "app/summary.hpp"
 #include "eval/evaluator.hpp"
+#include "report/report.hpp"
 
 int main(int argc, char** argv) {
   return th::app::guarded_main("transhuman-eval", [&]() -> int {
@@ -27,6 +28,15 @@ int main(int argc, char** argv) {
     if (options.dry_run) return 0;
     const auto summary = th::eval::evaluate(ctx.config, ctx.device, model.checkpoint, ctx.run_dir);
     std::cout << th::eval::markdown_table({summary});
+    // The page beside the outputs; with the training curve when the checkpoint lies in a
+    // training run's checkpoints/ folder.
+    th::report::PageSources page;
+    page.title = "TransHuman evaluation: " + summary.setting;
+    page.evals = {ctx.run_dir};
+    const auto metrics = std::filesystem::path(model.checkpoint).parent_path().parent_path() / "metrics.jsonl";
+    if (std::filesystem::exists(metrics)) page.metrics = metrics;
+    std::cout << "report: " << th::report::write_page(page, ctx.run_dir).string() << "
+";
     return 0;
   });
 }

@@ -36,6 +36,9 @@ struct EvalSummary {
 EvalSummary evaluate(const Config& config, const torch::Device& device,
                      const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir);
 
+// The file name of an image's panel in <out_dir>/images: "<human>_f<frame:04>_v<view:02>.png".
+std::string panel_file_name(const std::string& human, int frame, int view);
+
 // "| setting | images | PSNR | SSIM | LPIPS |" rows for a set of summaries.
 std::string markdown_table(const std::vector<EvalSummary>& summaries);
 
