@@ -60,7 +60,7 @@ int main(int argc, char** argv) {
     ablations->add_option("--configs", configs, "the folder of the rows' configs (for their descriptions)");
     ablations->add_option("--title", title, "the page's title");
     ablations->add_option("rows", rows, "row names")->required();
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
 
     fs::path written;
     if (*page) {
