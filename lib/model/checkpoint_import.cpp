@@ -137,6 +137,10 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   ext.globals["torch._utils._rebuild_parameter_with_state"] = [](const Value::List& a) {
     return a.at(0);
   };
+  // torch.__version__ saved in a checkpoint: a str subclass, read as its text.
+  ext.globals["torch.torch_version.TorchVersion"] = [](const Value::List& a) {
+    return a.empty() ? Value::str("") : a[0];
+  };
   ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
   for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
                         "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
