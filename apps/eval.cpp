@@ -6,6 +6,7 @@
 #include "app/app.hpp"
 #include "app/summary.hpp"
 #include "eval/evaluator.hpp"
+#include "report/report.hpp"
 
 int main(int argc, char** argv) {
   return th::app::guarded_main("transhuman-eval", [&]() -> int {
@@ -15,8 +16,10 @@ int main(int argc, char** argv) {
     int limit = -1;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
-    cli.add_option("--limit", limit, "evaluate only the first N images (quick look)");
-    CLI11_PARSE(cli, argc, argv);
+    th::app::add_force_option(cli, options);
+    cli.add_option("--limit", limit, "evaluate only the first N images (quick look)")
+        ->check(th::app::at_least(0));
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (limit >= 0) options.overrides.push_back("eval.limit=" + std::to_string(limit));
     th::app::apply_model_options(model, options);
 
@@ -25,6 +28,14 @@ int main(int argc, char** argv) {
     if (options.dry_run) return 0;
     const auto summary = th::eval::evaluate(ctx.config, ctx.device, model.checkpoint, ctx.run_dir);
     std::cout << th::eval::markdown_table({summary});
+    // The page beside the outputs; with the training curve when the checkpoint lies in a
+    // training run's checkpoints/ folder.
+    th::report::PageSources page;
+    page.title = "TransHuman evaluation: " + summary.setting;
+    page.evals = {ctx.run_dir};
+    const auto metrics = std::filesystem::path(model.checkpoint).parent_path().parent_path() / "metrics.jsonl";
+    if (std::filesystem::exists(metrics)) page.metrics = metrics;
+    std::cout << "report: " << th::report::write_page(page, ctx.run_dir).string() << "\n";
     return 0;
   });
 }

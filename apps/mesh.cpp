@@ -15,12 +15,15 @@ int main(int argc, char** argv) {
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
-    cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first");
-    cli.add_option("--voxel", request.voxel, "grid spacing in metres (SPEC 7: 0.005)")->check(CLI::PositiveNumber);
-    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density (SPEC 7: 20)");
+    cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first")
+        ->check(th::app::at_least(0));
+    cli.add_option("--voxel", request.voxel, "grid spacing in metres (SPEC 7: 0.005)")->check(th::app::above(0));
+    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density (SPEC 7: 20)")
+        ->check(th::app::finite_number());
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
-    cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)");
-    CLI11_PARSE(cli, argc, argv);
+    cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)")
+        ->check(th::app::at_least(0));
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-mesh", "runs/mesh");

@@ -21,16 +21,19 @@ int main(int argc, char** argv) {
     th::app::add_model_options(cli, model);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frames", frames, "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
-    auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)");
+    auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)")
+                      ->check(th::app::at_least(1));
     auto* path = cli.add_option("--path", request.path_file, "camera path file (YAML/JSON, see README)");
     auto* camera = cli.add_option("--camera", request.camera, "render from this dataset camera");
     orbit->excludes(path)->excludes(camera);
     path->excludes(camera);
-    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (SPEC 7: 3)");
-    cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)");
-    cli.add_option("--height", request.height, "output height");
+    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (SPEC 7: 3)")
+        ->check(th::app::at_least(0));
+    cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)")
+        ->check(th::app::at_least(1));
+    cli.add_option("--height", request.height, "output height")->check(th::app::at_least(1));
     cli.add_flag("--force", request.force, "replace frames of an earlier, different request in --out");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
     if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;

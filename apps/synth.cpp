@@ -27,11 +27,7 @@ int main(int argc, char** argv) {
     cli.add_flag("--force", force, "replace an existing dataset made with another config");
     cli.add_flag("-v,--verbose", verbose, "debug logging");
     cli.add_option("overrides", overrides, "config overrides, e.g. seed=3 frames=30");
-    try {
-      cli.parse(argc, argv);
-    } catch (const CLI::ParseError& e) {
-      return cli.exit(e);
-    }
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::logging::init_console(verbose);
 
     const auto config = th::config::from_tree<th::synth::SynthConfig>(

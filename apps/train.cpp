@@ -52,14 +52,18 @@ int main(int argc, char** argv) {
     int nproc = 0;
     std::string rank_state_dir;
     th::app::add_common_options(cli, options);
+    th::app::add_force_option(cli, options);
     cli.add_flag("--resume", resume, "continue the run in --out from its latest checkpoint");
-    cli.add_option("--max-steps", max_steps, "stop after this many steps in all (with a checkpoint)");
+    cli.add_option("--max-steps", max_steps, "stop after this many steps in all (with a checkpoint)")
+        ->check(th::app::at_least(0));
     cli.add_option("--nproc", nproc, "data-parallel training with this many local worker processes")
-        ->check(CLI::PositiveNumber);
+        ->check(th::app::at_least(1));
     cli.add_option("--rank-state", rank_state_dir, "every rank writes its final state to DIR/rank<r>.pt")
         ->group("");  // for tests
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (resume && options.out.empty()) th::fail("--resume needs --out (the run directory to continue)");
+    if (resume && options.force) th::fail("--resume continues the run in --out, --force replaces it: not both");
+    options.resume = resume;
 
     if (nproc > 1 && !options.dry_run) {
       if (std::getenv("WORLD_SIZE"))

@@ -40,7 +40,7 @@ function(th_test name)
     message(STATUS "${name}: no tests yet, skipped")
     return()
   endif()
-  if(TARGET Catch2::Catch2WithMain)
+  if(Catch2_VERSION VERSION_GREATER_EQUAL 3)
     # Catch2 3 (Debian 13): its own main, and the Catch2 2 header the tests include as a shim.
     add_executable(${name} ${sources})
     target_include_directories(${name} BEFORE PRIVATE ${PROJECT_SOURCE_DIR}/tests/support/catch2_v3)

@@ -2,11 +2,13 @@
 # The main job, as a new user runs it: installs dependencies, builds, generates the synthetic
 # dataset if absent, trains configs/demo.yaml (about 15 minutes on 2 cores), evaluates identity
 # generalization on the unseen synthetic people, prints the table and writes report/ (scores,
-# evaluation panels, training curve, a 36-view orbit video and a mesh of an unseen person).
+# evaluation panels, training curve, a 36-view orbit video and a mesh of an unseen person), with
+# report/index.html showing all of it in a browser (3D viewer included).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
-bash scripts/build.sh transhuman-synth transhuman-train transhuman-eval transhuman-render transhuman-mesh
+bash scripts/build.sh transhuman-synth transhuman-train transhuman-eval transhuman-render transhuman-mesh \
+  transhuman-report
 
 bin=build/apps
 data=data/synthetic
@@ -34,18 +36,22 @@ ckpt=$run/checkpoints/latest.pt
   --human CoreView_s08 --voxel 0.01 --threshold 8 --colors
 
 rm -rf "$report"
-mkdir -p "$report/renders"
-cp "$run/orbit/video.mp4" "$report/" 2>/dev/null || true
+mkdir -p "$report"
 cp "$run/orbit/contact_sheet.png" "$report/orbit_contact_sheet.png"
-cp "$run/mesh"/*.ply "$report/"
 cp "$run/mesh"/*_preview.png "$report/mesh_preview.png"
 cp "$run/eval_identity/results.md" "$run/eval_identity/per_image.csv" "$run/eval_identity/summary.json" "$report/"
-cp "$run/training_curve.png" "$report/" 2>/dev/null || true
-cp "$data/contact_sheet.png" "$report/dataset_contact_sheet.png" 2>/dev/null || true
-# A few evaluation panels (prediction | ground truth | inputs | error).
-ls "$run/eval_identity/images"/*.png | awk 'NR % 12 == 1' | head -9 | xargs -I{} cp {} "$report/renders/"
+links=(--link "orbit contact sheet=orbit_contact_sheet.png" --link "mesh preview=mesh_preview.png")
+if cp "$run/training_curve.png" "$report/" 2>/dev/null; then links+=(--link "training curve (PNG)=training_curve.png"); fi
+if cp "$data/contact_sheet.png" "$report/dataset_contact_sheet.png" 2>/dev/null; then
+  links+=(--link "dataset contact sheet=dataset_contact_sheet.png")
+fi
+# The page: scores, training curve, orbit, the mesh in a 3D viewer and every evaluation panel
+# (prediction | ground truth | inputs | error), copied in with the video and the .ply.
+"$bin/transhuman-report" page --out "$report" --title "TransHuman-C++ demo: identity generalization" \
+  --eval "$run/eval_identity" --metrics "$run/metrics.jsonl" --orbit "$run/orbit" \
+  --mesh "$(ls "$run/mesh"/*.ply | head -1)" "${links[@]}"
 echo
 echo "Identity generalization on the unseen synthetic people ($(date -u +%F)):"
 cat "$report/results.md"
-echo "Report: $report/ (results.md, per_image.csv, training_curve.png, renders/, video.mp4,"
-echo "        orbit_contact_sheet.png, a mesh .ply and mesh_preview.png)"
+echo "Report: open $report/index.html in a browser (works from the folder, no server); beside it"
+echo "        results.md, per_image.csv, eval_identity/images/, orbit/ (frames, video.mp4), the mesh .ply"

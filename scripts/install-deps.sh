@@ -8,7 +8,8 @@ packages=(
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
   libopencv-dev libcli11-dev libspdlog-dev libfmt-dev catch2 libyaml-cpp-dev libgloo-dev
   libzstd-dev
-  python3 python3-numpy python3-scipy python3-torch python3-torchvision python3-skimage
+  chromium libjs-three  # the HTML report: three.js for its 3D viewer, Chromium for its test
+  python3 python3-numpy python3-scipy python3-torch python3-torchvision python3-skimage python3-opencv
 )
 # Optional extras (fuzzing): installed only with --with-fuzz.
 if [[ "${1:-}" == "--with-fuzz" ]]; then

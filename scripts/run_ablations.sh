@@ -7,12 +7,12 @@
 #   ROW       file names in configs/ablations without .yaml (full, fdi_wo_h, fdi_wo_a, nk_3, ...),
 #             or `all`
 #   -o OUT    output folder (default runs/ablations): OUT/<row>/ is each run, OUT/ablations.md
-#             the table
+#             the table, OUT/index.html the page (rows side by side, paired against full)
 #   -s SETTING evaluation setting (default identity: the unseen people)
 #   KEY=VALUE overrides applied to every row (e.g. train.epochs=4 for a quick look)
 #
 # A row whose evaluation already exists is not run again (delete OUT/<row> to redo it); a row
-# whose training was interrupted resumes from its last checkpoint. Builds the two apps first.
+# whose training was interrupted resumes from its last checkpoint. Builds the apps first.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=runs/ablations
@@ -39,7 +39,7 @@ for row in "${rows[@]}"; do
   [[ -f configs/ablations/$row.yaml ]] || { echo "run_ablations.sh: no configs/ablations/$row.yaml" >&2; exit 2; }
 done
 
-[[ -n "${TH_SKIP_BUILD:-}" ]] || bash scripts/build.sh transhuman-train transhuman-eval
+[[ -n "${TH_SKIP_BUILD:-}" ]] || bash scripts/build.sh transhuman-train transhuman-eval transhuman-report
 bin=build/apps
 mkdir -p "$out"
 
@@ -55,11 +55,11 @@ for row in "${rows[@]}"; do
   if [[ -f $run/checkpoints/latest.pt && ! -f $run/train_done ]]; then
     "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" --resume "${overrides[@]}"
   elif [[ ! -f $run/train_done ]]; then
-    "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" "${overrides[@]}"
+    "$bin/transhuman-train" --config "configs/ablations/$row.yaml" --out "$run" --force "${overrides[@]}"
   fi
   echo $((SECONDS - start)) > "$run/train_done"
   "$bin/transhuman-eval" --config "configs/ablations/$row.yaml" --checkpoint "$run/checkpoints/latest.pt" \
-    --out "$run/eval_$setting" --setting "$setting" "${overrides[@]}"
+    --out "$run/eval_$setting" --setting "$setting" --force "${overrides[@]}"
 done
 
 # The table, in the paper's format (one row per configuration, PSNR / SSIM / LPIPS).
@@ -78,6 +78,7 @@ table=$out/ablations.md
       "$lp" "$(( $(cat "$out/$row/train_done") / 60 ))"
   done
 } > "$table"
+"$bin/transhuman-report" ablations --root "$out" --setting "$setting" "${rows[@]}" >/dev/null
 echo
 cat "$table"
-echo "Table: $table"
+echo "Table: $table; page: $out/index.html"

@@ -2,7 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <iostream>
+#include <map>
 
 #include "core/error.hpp"
 #include "core/logging.hpp"
@@ -18,10 +20,93 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
   cli.add_option("--device", o.device, "compute device (overrides the config's 'device')")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   cli.add_option("--threads", o.threads, "CPU threads for LibTorch (0: one per core)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(CLI::Range(0, 4096).description("0 to 4096"));
   cli.add_flag("--dry-run", o.dry_run, "build everything the config names, print a summary, exit");
   cli.add_flag("-v,--verbose", o.verbose, "debug logging");
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
+}
+
+namespace {
+
+// A CLI11 check of a number: `ok` decides, `requirement` is what the message says it must be.
+CLI::Validator number_check(std::function<bool(double)> ok, const std::string& requirement) {
+  return CLI::Validator(
+      [ok, requirement](std::string& text) -> std::string {
+        try {
+          size_t used = 0;
+          const double v = std::stod(text, &used);
+          if (used == text.size()) return ok(v) ? "" : "must be " + requirement + ", not " + text;
+        } catch (const std::exception&) {
+        }
+        return "'" + text + "' is not a number";
+      },
+      "NUMBER " + requirement);
+}
+
+}  // namespace
+
+CLI::Validator finite_number() {
+  return number_check([](double v) { return std::isfinite(v); }, "finite");
+}
+CLI::Validator at_least(double min) {
+  return number_check([min](double v) { return v >= min; }, ">= " + CLI::detail::to_string(min));
+}
+CLI::Validator above(double bound) {
+  return number_check([bound](double v) { return v > bound; }, "> " + CLI::detail::to_string(bound));
+}
+
+void add_force_option(CLI::App& cli, CommonOptions& o) {
+  cli.add_flag("--force", o.force, "replace what --out already holds");
+  o.guard_out = true;
+}
+
+namespace {
+
+// "a.b.c" -> value text of every scalar leaf of a YAML tree.
+void leaves(const YAML::Node& node, const std::string& prefix, std::map<std::string, std::string>& out) {
+  if (node.IsMap()) {
+    for (const auto& kv : node) leaves(kv.second, prefix + "." + kv.first.as<std::string>(), out);
+  } else {
+    out[prefix] = YAML::Dump(node);
+  }
+}
+
+}  // namespace
+
+void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume) {
+  std::error_code ec;
+  if (!fs::exists(dir, ec) || fs::is_empty(dir, ec)) return;
+  if (!fs::is_directory(dir, ec)) fail("--out '", dir.string(), "' is a file, not a folder");
+  if (resume) {
+    const fs::path previous = dir / "config.yaml";
+    if (!fs::exists(previous)) fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
+    std::map<std::string, std::string> before, now;
+    leaves(YAML::LoadFile(previous.string())["model"], "model", before);
+    leaves(resolved["model"], "model", now);
+    std::string changed;
+    for (const auto& [key, value] : now) {
+      const auto it = before.find(key);
+      if (it == before.end() || it->second != value)
+        changed += (changed.empty() ? "" : ", ") + key + " (run: " + (it == before.end() ? "absent" : it->second) +
+                   ", now: " + value + ")";
+    }
+    if (!changed.empty())
+      fail("cannot resume the run in '", dir.string(), "' with other model settings: ", changed,
+           " (start a new run in another folder, or --force to replace this one)");
+    return;
+  }
+  if (!force) {
+    std::string some;
+    int n = 0;
+    for (const auto& e : fs::directory_iterator(dir)) {
+      if (n++ < 3) some += (some.empty() ? "" : ", ") + e.path().filename().string();
+    }
+    fail("--out '", dir.string(), "' already holds ", n, " entr", n == 1 ? "y" : "ies", " (", some, n > 3 ? ", ..." : "",
+         "): choose another folder, --force to replace its contents",
+         fs::exists(dir / "checkpoints") ? ", or --resume to continue the run" : "");
+  }
+  for (const auto& e : fs::directory_iterator(dir)) fs::remove_all(e.path(), ec);
+  if (ec) fail("--force: cannot clear '", dir.string(), "': ", ec.message());
 }
 
 void add_model_options(CLI::App& cli, ModelOptions& m) {
@@ -52,6 +137,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   const std::string out = !o.out.empty() ? o.out : default_out;
   if (!out.empty()) {
     ctx.run_dir = out;
+    if (o.guard_out) claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume);
     std::error_code ec;
     fs::create_directories(ctx.run_dir, ec);
     if (ec) fail("cannot create run directory '", out, "': ", ec.message());
@@ -73,13 +159,35 @@ int guarded_main(const std::string& app_name, const std::function<int()>& body) 
     return body();
   } catch (const Error& e) {
     std::cerr << app_name << ": error: " << e.what() << std::endl;
+    logging::error_to_files(std::string("error: ") + e.what());
     return 2;
   } catch (const c10::Error& e) {
     std::cerr << app_name << ": internal error: " << e.what_without_backtrace() << std::endl;
+    logging::error_to_files(std::string("internal error: ") + e.what_without_backtrace());
     return 3;
   } catch (const std::exception& e) {
     std::cerr << app_name << ": internal error: " << e.what() << std::endl;
+    logging::error_to_files(std::string("internal error: ") + e.what());
     return 3;
+  }
+}
+
+std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
+  try {
+    cli.parse(argc, argv);
+    return std::nullopt;
+  } catch (const CLI::CallForHelp&) {
+    std::cout << cli.help();
+    return 0;
+  } catch (const CLI::CallForAllHelp&) {
+    std::cout << cli.help("", CLI::AppFormatMode::All);
+    return 0;
+  } catch (const CLI::ParseError& e) {
+    std::string message = e.what();
+    message = message.substr(0, message.find('\n'));
+    const std::string app = argc > 0 ? fs::path(argv[0]).filename().string() : cli.get_name();
+    std::cerr << app << ": error: " << message << " (see --help)" << std::endl;
+    return 2;
   }
 }
 

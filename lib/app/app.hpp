@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,11 +24,30 @@ struct CommonOptions {
   bool dry_run = false;
   bool verbose = false;
   bool quiet = false;                  // errors only on the console (data-parallel ranks other than 0)
+  // --out must be empty or new unless --force (replace its contents) or, for training, --resume
+  // (continue the run there; the model section of its config.yaml must be unchanged).
+  bool guard_out = false;
+  bool force = false;
+  bool resume = false;
 };
 
 // Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional
 // key=value overrides on `cli`.
 void add_common_options(CLI::App& cli, CommonOptions& options);
+
+// A CLI11 check: the value is a finite number (not nan or inf).
+CLI::Validator finite_number();
+// A CLI11 check: the value is a number >= `min` (the message quotes the bound, not a range).
+CLI::Validator at_least(double min);
+CLI::Validator above(double bound);  // a number > bound
+
+// Registers --force on `cli` and turns on the --out guard (training and evaluation).
+void add_force_option(CLI::App& cli, CommonOptions& options);
+
+// The --out guard of start_run: a folder that holds files is refused unless `force` (its
+// contents are removed) or `resume` (the model keys of its config.yaml must equal `resolved`'s;
+// those that differ are named). Throws th::Error.
+void claim_run_dir(const std::filesystem::path& dir, const YAML::Node& resolved, bool force, bool resume);
 
 // What the commands that use a trained model share (eval, render, mesh): the checkpoint and
 // the split setting whose people and reference views they use.
@@ -58,6 +78,11 @@ RunContext start_run(const CommonOptions& options, const std::string& app_name,
 // Runs `body` and turns every failure into one line on stderr and a non-zero exit code:
 // 2 for user errors (th::Error, bad command line), 3 for internal errors.
 int guarded_main(const std::string& app_name, const std::function<int()>& body);
+
+// Parses the command line. Returns the exit code when the program should stop now: 0 after
+// --help, 2 after a parse error (unknown flag, missing or invalid value), reported as one line
+// "<app>: error: ..." on stderr; nothing when the program goes on.
+std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv);
 
 // "Model  6,922,244" style thousands separators.
 std::string with_commas(int64_t n);

@@ -35,7 +35,11 @@ struct DataConfig {
   double ratio = 0.5;                            // image resize factor
   std::string visibility = "rasterize";          // rasterize | files
   std::string visibility_root = "";              // for visibility: files (NHP's zju_rasterization)
+  std::string visibility_missing = "error";      // files: a missing file is an error | all_visible (warns)
   double box_padding = 0.05;                     // world AABB padding on z (metres)
+  // Target mask border band (SPEC 2.1 step 6): marked on the distorted mask before undistortion
+  // [parity], or on the undistorted one.
+  std::string border_band = "distorted";         // distorted | undistorted
   PatchConfig patch;
   JitterConfig jitter;
   int workers = 2;                               // background loader threads
@@ -67,9 +71,9 @@ struct TransHEConfig {
   int mlp_dim = 768;
   int pe_freqs = 32;
   double pe_scale = 1.5;           // Pc = mean(v_template[c]) / pe_scale
-  // float32 sin(x * f + phase): "separate" rounds product and sum (numpy); "fused" rounds once
-  // (PyTorch's addcmul with FMA, as the reference evaluated it on its hardware).
-  std::string pe_rounding = "separate";
+  // float32 sin(x * f + phase): "fused" rounds once, as the reference's torch.addcmul (FMA)
+  // [parity, SPEC 3.2]; "separate" rounds the product and the sum (numpy's evaluation).
+  std::string pe_rounding = "fused";
 };
 
 struct DPaRFConfig {
@@ -77,6 +81,7 @@ struct DPaRFConfig {
   std::string coordinate = "relative";  // relative | absolute | none
   double softmax_temperature = 0.5;    // w = softmax(-d / T)
   int pe_freqs = 10;
+  std::string pe_rounding = "fused";   // fused [parity] | separate, as model.transhe.pe_rounding
 };
 
 struct FDIConfig {
@@ -181,7 +186,9 @@ template <class V> void visit_fields(V& v, DataConfig& c) {
   v("ratio", c.ratio);
   v.choice("visibility", c.visibility, {"rasterize", "files"});
   v("visibility_root", c.visibility_root);
+  v.choice("visibility_missing", c.visibility_missing, {"error", "all_visible"});
   v("box_padding", c.box_padding);
+  v.choice("border_band", c.border_band, {"distorted", "undistorted"});
   v("patch", c.patch);
   v("jitter", c.jitter);
   v("workers", c.workers);
@@ -209,13 +216,14 @@ template <class V> void visit_fields(V& v, TransHEConfig& c) {
   v("mlp_dim", c.mlp_dim);
   v("pe_freqs", c.pe_freqs);
   v("pe_scale", c.pe_scale);
-  v.choice("pe_rounding", c.pe_rounding, {"separate", "fused"});
+  v.choice("pe_rounding", c.pe_rounding, {"fused", "separate"});
 }
 template <class V> void visit_fields(V& v, DPaRFConfig& c) {
   v("nk", c.nk);
   v.choice("coordinate", c.coordinate, {"relative", "absolute", "none"});
   v("softmax_temperature", c.softmax_temperature);
   v("pe_freqs", c.pe_freqs);
+  v.choice("pe_rounding", c.pe_rounding, {"fused", "separate"});
 }
 template <class V> void visit_fields(V& v, FDIConfig& c) {
   v("appearance", c.appearance);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 namespace th::config {
@@ -22,9 +23,24 @@ void merge_into(YAML::Node base, const YAML::Node& over) {
   }
 }
 
+// Every key of a config file has a value and appears once per section (yaml-cpp would give a
+// key without value as null, which reads as "use the default", and keep duplicate keys).
+void check_values(const YAML::Node& node, const std::string& path, const fs::path& file) {
+  std::set<std::string> keys;
+  for (const auto& kv : node) {
+    const std::string key = kv.first.as<std::string>();
+    const std::string full = path.empty() ? key : path + "." + key;
+    if (!keys.insert(key).second) fail("config file '", file.string(), "': key '", full, "' appears twice");
+    if (kv.second.IsNull() && full != "parent")
+      fail("config file '", file.string(), "': key '", full, "' has no value");
+    if (kv.second.IsMap()) check_values(kv.second, full, file);
+  }
+}
+
 YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
   std::error_code ec;
   const fs::path canonical = fs::weakly_canonical(file, ec);
+  if (fs::is_directory(file)) fail("config file '", file.string(), "' is a folder, not a file");
   if (!fs::is_regular_file(file)) fail("config file '", file.string(), "' does not exist");
   if (std::find(chain.begin(), chain.end(), canonical) != chain.end())
     fail("config file '", file.string(), "' is its own parent (inheritance cycle)");
@@ -37,8 +53,10 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
     fail("config file '", file.string(), "': YAML error at line ", e.mark.line + 1, ", column ",
          e.mark.column + 1, ": ", e.msg);
   }
-  if (node.IsNull()) node = YAML::Node(YAML::NodeType::Map);
+  if (node.IsNull())
+    fail("config file '", file.string(), "' is empty (a config names at least its parent: 'parent: default.yaml')");
   if (!node.IsMap()) fail("config file '", file.string(), "' must hold a map of keys");
+  check_values(node, "", file);
 
   const YAML::Node parent = node["parent"];
   if (!parent.IsDefined() || parent.IsNull()) return node;

@@ -27,4 +27,18 @@ void add_file_sink(const std::filesystem::path& file) {
   }
 }
 
+void error_to_files(const std::string& message) {
+  const auto logger = spdlog::default_logger();
+  if (!logger) return;
+  const auto& sinks = logger->sinks();
+  const spdlog::details::log_msg msg(logger->name(), spdlog::level::err, message);
+  for (size_t i = 1; i < sinks.size(); ++i) {  // sinks[0] is the console
+    try {
+      sinks[i]->log(msg);
+      sinks[i]->flush();
+    } catch (const spdlog::spdlog_ex&) {  // a full disk must not hide the error itself
+    }
+  }
+}
+
 }  // namespace th::logging

@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <chrono>
 #include <numeric>
+#include <mutex>
 #include <random>
+#include <set>
 
 #include "body/smpl.hpp"
 #include "body/visibility.hpp"
@@ -15,6 +17,19 @@
 #include "geometry/camera.hpp"
 
 namespace th::data {
+
+namespace {
+
+// Each distinct message once per process (the loader threads share it).
+void warn_once(const std::string& message) {
+  static std::mutex mutex;
+  static std::set<std::string> said;
+  std::lock_guard<std::mutex> lock(mutex);
+  if (said.insert(message).second) spdlog::warn("{}", message);
+}
+
+}  // namespace
+
 namespace fs = std::filesystem;
 using torch::indexing::Slice;
 
@@ -50,7 +65,7 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
     fail("data.root '", config.root, "' does not exist", config.dataset == "synthetic"
          ? " (make it with: transhuman-synth --out " + config.root + ")" : "");
   for (const auto& range : setting_.humans) {
-    auto human = HumanSequence::open(human_folder(config.root, range.name));
+    auto human = HumanSequence::open(human_folder(config.root, range.name, config.dataset));
     const int h = int(humans_.size());
     auto check_view = [&](int v, const char* what) {
       if (v < 0 || v >= human->num_cameras())
@@ -135,10 +150,17 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     Rs.push_back(view.camera.R);
     Ts.push_back(view.camera.T);
     if (config_.visibility == "files") {
-      const fs::path img = fs::relative(human.image_path(it.frame, v), human.dir());
-      const fs::path file = fs::path(config_.visibility_root) / human.name() / "visibility" /
-                            img.parent_path() / (img.stem().string() + ".npy");
-      vis.push_back(body::load_visibility_file(file, smpl_->num_vertices()));
+      const fs::path file = visibility_file(config_.visibility_root, human, it.frame, v);
+      if (!fs::exists(file) && config_.visibility_missing == "all_visible") {
+        warn_once("visibility file '" + file.string() + "' is missing: every vertex counts as visible " +
+                  "(data.visibility_missing: all_visible, as the reference silently did)");
+        vis.push_back(torch::ones({smpl_->num_vertices()}, torch::kBool));
+      } else {
+        if (!fs::exists(file))
+          fail("visibility file '", file.string(), "' is missing (data.visibility: files; set ",
+               "data.visibility_missing: all_visible to treat every vertex as visible instead)");
+        vis.push_back(body::load_visibility_file(file, smpl_->num_vertices()));
+      }
     } else {
       vis.push_back(body::vertex_visibility(s.body.vertices, faces, view.camera.K, view.camera.R,
                                             view.camera.T, view.rgb.cols, view.rgb.rows));
@@ -152,7 +174,8 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
 
   // Target view.
   const ViewImage target =
-      load_view(human, it.frame, it.target_view, {config_.ratio, true, jittered ? &jitter : nullptr});
+      load_view(human, it.frame, it.target_view,
+                {config_.ratio, true, jittered ? &jitter : nullptr, config_.border_band == "distorted"});
   const int W = target.rgb.cols, H = target.rgb.rows;
   s.target_image = image_tensor(target.rgb);
   s.target_mask = mask_tensor(target.mask);
@@ -165,7 +188,9 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   torch::Tensor pixels;  // (N, 2) x, y
   if (train) {
     const cv::Mat bmask = box_mask(box, cam.K, cam.R, cam.T, W, H);
-    const cv::Mat person = target.mask == 1;
+    // Patch centres on the person: every non-zero mask pixel inside the box, band and blended
+    // edge values included, as the reference's `msk * bound_mask > 0` [parity].
+    const cv::Mat person = (target.mask != 0) & (bmask != 0);
     const auto& p = config_.patch;
     const auto patches = sample_patches(person / 255, bmask, p.count, p.size, p.body_prob, rng);
     s.patch_rgb = torch::zeros({int64_t(patches.size()), 3, p.size, p.size}, torch::kFloat32);

@@ -1,10 +1,22 @@
 #include "data/h36m.hpp"
 
+#include "core/error.hpp"
+
 namespace th::data {
 
-std::filesystem::path human_folder(const std::filesystem::path& root, const std::string& name) {
-  const std::filesystem::path posing = root / name / "Posing";
-  if (std::filesystem::is_regular_file(posing / "annots.npy")) return posing;
+namespace fs = std::filesystem;
+
+fs::path human_folder(const fs::path& root, const std::string& name, const std::string& dataset) {
+  const fs::path posing = root / name / "Posing";
+  if (dataset == "h36m") {
+    if (!fs::is_regular_file(posing / "annots.npy") && fs::is_regular_file(root / name / "annots.npy"))
+      fail("'", (posing / "annots.npy").string(), "' is missing: data.dataset is h36m (Animatable NeRF's ",
+           "<S>/Posing layout) but '", (root / name).string(), "' has the ZJU-MoCap layout; set data.dataset: zju_mocap");
+    return posing;
+  }
+  if (!fs::is_regular_file(root / name / "annots.npy") && fs::is_regular_file(posing / "annots.npy"))
+    fail("'", (root / name / "annots.npy").string(), "' is missing: data.dataset is ", dataset, " but '",
+         posing.string(), "' holds an H36M subject; set data.dataset: h36m");
   return root / name;
 }
 

@@ -9,7 +9,10 @@
 
 namespace th::data {
 
-// <root>/<name>/Posing when it holds an annots.npy (H36M), else <root>/<name> (ZJU-MoCap).
-std::filesystem::path human_folder(const std::filesystem::path& root, const std::string& name);
+// The folder of one person by data.dataset: <root>/<name>/Posing for h36m, <root>/<name> for
+// zju_mocap and synthetic. A layout that does not match the named dataset fails naming the
+// folder it expected and the key to change.
+std::filesystem::path human_folder(const std::filesystem::path& root, const std::string& name,
+                                   const std::string& dataset);
 
 }  // namespace th::data

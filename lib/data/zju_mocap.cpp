@@ -4,6 +4,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <algorithm>
+#include <cctype>
+#include <cstdio>
+#include <fstream>
 #include <numeric>
 #include <sstream>
 
@@ -17,6 +21,17 @@ namespace fs = std::filesystem;
 namespace {
 
 // A (3,3)/(3,1)/(5,1) calibration entry as float64 of the expected shape.
+// Every value read from data must be a finite number: the error names the file, the entry and
+// the flat index of the first offender.
+void require_finite(const torch::Tensor& t, const fs::path& file, const std::string& what) {
+  const auto bad = (~torch::isfinite(t)).reshape({-1}).nonzero();
+  if (bad.numel() > 0) {
+    const int64_t i = bad[0][0].item<int64_t>();
+    fail("'", file.string(), "': ", what, " holds ", t.reshape({-1})[i].item<double>(), " at index ", i,
+         " (", bad.size(0), " non-finite value", bad.size(0) > 1 ? "s" : "", ")");
+  }
+}
+
 torch::Tensor calib(const io::Value& list, size_t cam, std::vector<int64_t> shape,
                     const std::string& what, const fs::path& file) {
   torch::Tensor t;
@@ -29,12 +44,41 @@ torch::Tensor calib(const io::Value& list, size_t cam, std::vector<int64_t> shap
   if (t.numel() != n)
     fail("'", file.string(), "': cams['", what, "'][", cam, "] has ", t.numel(),
          " values, expected ", n);
+  require_finite(t, file, "cams['" + what + "'][" + std::to_string(cam) + "]");
   return t.reshape(shape).contiguous();
+}
+
+// A JPEG ends with the EOI marker (FF D9); libjpeg decodes a truncated file with only a warning
+// (grey lower rows), so a missing marker is an error here.
+bool jpeg_truncated(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
+  const auto size = static_cast<std::streamoff>(in.tellg());
+  if (!in || size < 4) return true;
+  const std::streamoff tail = std::min<std::streamoff>(size, 64);
+  std::string bytes(static_cast<size_t>(tail), '\0');
+  in.seekg(size - tail);
+  in.read(bytes.data(), tail);
+  return bytes.find("\xFF\xD9") == std::string::npos;
+}
+
+// uint8 -> float32 in [0, 1] as the reference computes it: a float32 division by 255 (OpenCV's
+// scaled conversion multiplies by 1/255 instead, which differs in the last bit for some values).
+cv::Mat to_unit_float(const cv::Mat& u8) {
+  cv::Mat out(u8.size(), CV_MAKETYPE(CV_32F, u8.channels()));
+  const cv::Mat src = u8.isContinuous() ? u8 : u8.clone();
+  const uint8_t* in = src.ptr<uint8_t>();
+  float* o = out.ptr<float>();
+  for (size_t i = 0, n = src.total() * src.channels(); i < n; ++i) o[i] = static_cast<float>(in[i]) / 255.0f;
+  return out;
 }
 
 cv::Mat read_image(const fs::path& path, int flags) {
   cv::Mat img = cv::imread(path.string(), flags);
   if (img.empty()) fail("cannot read image '", path.string(), "' (missing or corrupt)");
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  if ((ext == ".jpg" || ext == ".jpeg") && jpeg_truncated(path))
+    fail("image '", path.string(), "' is truncated (no JPEG end marker)");
   return img;
 }
 
@@ -50,6 +94,7 @@ torch::Tensor flat_f64(const io::Value& dict, const char* key, int64_t expected,
   }
   if (expected > 0 && t.numel() != expected)
     fail("'", file.string(), "': '", key, "' has ", t.numel(), " values, expected ", expected);
+  require_finite(t, file, std::string("'") + key + "'");
   return t;
 }
 
@@ -184,6 +229,7 @@ torch::Tensor HumanSequence::load_vertices(int frame) const {
   const torch::Tensor v = io::read_npy(file);
   if (v.dim() != 2 || v.size(1) != 3)
     fail("'", file.string(), "' must hold an (N, 3) array, not ", v.sizes());
+  require_finite(v, file, "the vertices");
   return v.to(torch::kFloat64);
 }
 
@@ -199,6 +245,8 @@ cv::Mat HumanSequence::load_mask(int frame, int cam) const {
     if (!p) continue;
     cv::Mat m = read_image(*p, cv::IMREAD_GRAYSCALE);
     m = m != 0;
+    if (!mask.empty() && m.size() != mask.size())
+      fail("'", p->string(), "' is ", m.cols, "x", m.rows, " but '", tried[0], "' is ", mask.cols, "x", mask.rows);
     mask = mask.empty() ? m : (mask | m);
   }
   if (mask.empty())
@@ -206,31 +254,47 @@ cv::Mat HumanSequence::load_mask(int frame, int cam) const {
   return mask / 255;  // 0/1
 }
 
+fs::path visibility_file(const fs::path& root, const HumanSequence& human, int frame, int cam) {
+  const fs::path image = fs::relative(human.image_path(frame, cam), human.dir());
+  const std::string stem = image.stem().string();
+  const int number = frame_number_of(image.filename().string());
+  if (number < 0) fail(human.name(), ": cannot read a frame number from image name '", image.string(), "'");
+  const bool digits = !stem.empty() && std::all_of(stem.begin(), stem.end(), [](unsigned char c) { return std::isdigit(c); });
+  const int width = digits ? int(stem.size()) : 4;
+  char name[32];
+  std::snprintf(name, sizeof name, "%0*d.npy", width, number);
+  return root / human.name() / "visibility" / image.parent_path() / name;
+}
+
 ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOptions& o) {
   const fs::path path = human.image_path(frame, cam);
   cv::Mat bgr = read_image(path, cv::IMREAD_COLOR);
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  rgb.convertTo(rgb, CV_32FC3, 1.0 / 255.0);
+  rgb = to_unit_float(rgb);
   cv::Mat mask = human.load_mask(frame, cam);
   if (mask.size() != rgb.size())
     fail("mask of '", path.string(), "' is ", mask.cols, "x", mask.rows, " but the image is ",
          rgb.cols, "x", rgb.rows);
   if (o.jitter) apply_jitter(rgb, *o.jitter);
 
+  const auto mark_band = [](cv::Mat& m) {  // SPEC 2.1 step 6: target mask only
+    const cv::Mat kernel = cv::Mat::ones(5, 5, CV_8U);
+    cv::Mat eroded, dilated;
+    cv::erode(m, eroded, kernel);
+    cv::dilate(m, dilated, kernel);
+    m.setTo(100, (dilated - eroded) == 1);
+  };
+  if (o.border_band && o.band_before_undistort) mark_band(mask);
+
   const Camera& calib = human.camera(cam);
-  const cv::Mat K = geometry::to_cv(calib.K), D = geometry::to_cv(calib.D);
+  // The reference undistorts with K and D rounded to float32 [parity].
+  const auto f32 = [](const torch::Tensor& t) { return t.to(torch::kFloat32).to(torch::kFloat64); };
+  const cv::Mat K = geometry::to_cv(f32(calib.K)), D = geometry::to_cv(f32(calib.D));
   cv::Mat und_rgb, und_mask;
   cv::undistort(rgb, und_rgb, K, D);
   cv::undistort(mask, und_mask, K, D);
-
-  if (o.border_band) {  // SPEC 2.1: target mask only
-    const cv::Mat kernel = cv::Mat::ones(5, 5, CV_8U);
-    cv::Mat eroded, dilated;
-    cv::erode(und_mask, eroded, kernel);
-    cv::dilate(und_mask, dilated, kernel);
-    und_mask.setTo(100, (dilated - eroded) == 1);
-  }
+  if (o.border_band && !o.band_before_undistort) mark_band(und_mask);
 
   ViewImage view;
   const cv::Size size(int(rgb.cols * o.ratio), int(rgb.rows * o.ratio));

@@ -82,10 +82,19 @@ class HumanSequence {
 // "CoreView_313_Camera_(1)_0001_2019-08-23_16-08-50.592.jpg" -> 1. -1 if it has none.
 int frame_number_of(const std::string& filename);
 
+// NHP's zju_rasterization layout of precomputed SMPL visibility (SPEC 1.1), as the reference
+// reads it: <root>/<human>/visibility/<camera folder>/<frame number>.npy, the number zero-padded
+// like the renamed images (an all-digit image name gives the width, e.g. 000123.jpg -> 6;
+// CoreView_313/315's original long names -> 4), whatever the image files are called.
+std::filesystem::path visibility_file(const std::filesystem::path& root, const HumanSequence& human,
+                                      int frame, int camera);
+
 // One view after SPEC 2.1: undistorted, resized by `ratio`, background black.
 struct ViewImage {
   cv::Mat rgb;   // CV_32FC3, RGB in [0, 1]
-  cv::Mat mask;  // CV_8U: 0 background, 1 person, 100 border band (target views only)
+  // CV_8U: 0 background, 1 person, 100 border band (target views only). With the band marked
+  // before undistortion [parity], edge pixels hold bilinear blends of 0, 1 and 100.
+  cv::Mat mask;
   Camera camera; // K scaled by ratio (no half-pixel shift), T in metres
 };
 
@@ -93,6 +102,9 @@ struct ViewOptions {
   double ratio = 0.5;
   bool border_band = false;         // target views: mark dilate5x5 - erode5x5 with 100
   const JitterParams* jitter = nullptr;
+  // SPEC 2.1 step 6 [parity]: the band is marked on the distorted mask, which is then undistorted
+  // (bilinear); false: marked on the undistorted mask (a clean 0/1/100 mask).
+  bool band_before_undistort = true;
 };
 ViewImage load_view(const HumanSequence& human, int frame, int camera, const ViewOptions& options);
 

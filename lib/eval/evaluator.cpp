@@ -51,6 +51,12 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
 
 }  // namespace
 
+std::string panel_file_name(const std::string& human, int frame, int view) {
+  char name[32];
+  std::snprintf(name, sizeof name, "_f%04d_v%02d.png", frame, view);
+  return human + name;
+}
+
 std::string markdown_table(const std::vector<EvalSummary>& summaries) {
   std::string out = "| setting | images | PSNR | SSIM | LPIPS |\n|---|---|---|---|---|\n";
   for (const auto& s : summaries)
@@ -99,9 +105,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
       }
       imgs.push_back(train::error_map(r.pred, r.gt));
       captions.push_back("|error|");
-      char name[128];
-      std::snprintf(name, sizeof name, "%s_f%04d_v%02d.png", s.human.c_str(), s.frame, s.target_view);
-      video::write_png(image_dir / name, train::panel(imgs, captions));
+      video::write_png(image_dir / panel_file_name(s.human, s.frame, s.target_view), train::panel(imgs, captions));
     }
     char note[64];
     std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", r.psnr, r.ssim);

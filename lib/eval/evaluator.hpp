@@ -18,7 +18,8 @@ struct ImageScore {
   int frame = 0, view = 0;
   double psnr = 0, ssim = 0, lpips = 0;  // lpips NaN when unavailable
   double seconds = 0;
-  int64_t culled_points = 0, points = 0;
+  int64_t points = 0;         // rays x samples
+  int64_t culled_points = 0;  // of those, farther than render.cull_distance from the body
 };
 
 struct EvalSummary {
@@ -34,6 +35,9 @@ struct EvalSummary {
 // `out_dir`. config.eval.limit > 0 evaluates only the first images.
 EvalSummary evaluate(const Config& config, const torch::Device& device,
                      const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir);
+
+// The file name of an image's panel in <out_dir>/images: "<human>_f<frame:04>_v<view:02>.png".
+std::string panel_file_name(const std::string& human, int frame, int view);
 
 // "| setting | images | PSNR | SSIM | LPIPS |" rows for a set of summaries.
 std::string markdown_table(const std::vector<EvalSummary>& summaries);

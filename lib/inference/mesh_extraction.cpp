@@ -5,6 +5,7 @@
 #include <torch/torch.h>
 
 #include <chrono>
+#include <cstdio>
 
 #include "core/error.hpp"
 #include "core/progress.hpp"
@@ -81,13 +82,17 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   char stem[160];
   std::snprintf(stem, sizeof stem, "%s_frame%04d", human.name().c_str(), frame);
   summary.ply = out_dir / (std::string(stem) + ".ply");
-  mesh::write_ply(summary.ply, summary.mesh,
-                  "TransHuman-C++ mesh of " + human.name() + " frame " + std::to_string(frame));
-
   // Preview: from the view camera's direction and from its side, upright.
   const auto& cam = human.camera(request.view);
   const auto R = cam.R.to(torch::kFloat64);
   const auto forward = R[2], down = R[1];
+  // The header names the world's up (the view camera's), for viewers such as the HTML report's.
+  char up[96];
+  std::snprintf(up, sizeof up, ", up %.4f %.4f %.4f", -down[0].item<double>(), -down[1].item<double>(),
+                -down[2].item<double>());
+  mesh::write_ply(summary.ply, summary.mesh,
+                  "TransHuman-C++ mesh of " + human.name() + " frame " + std::to_string(frame) + up);
+
   const auto side = torch::cross(down, forward, 0);
   std::vector<cv::Mat> views;
   for (const auto& dir : {forward, side}) {

@@ -440,6 +440,15 @@ struct Node {
   std::shared_ptr<Value> value;
 };
 
+// Array::name of a numpy scalar (numpy.core.multiarray.scalar), which Python hashes like the
+// equal int, float or bool: such keys become plain keys.
+constexpr const char* kNumpyScalar = "numpy scalar";
+
+bool is_numpy_scalar(const Node* n) {
+  return n->t == Node::T::Array && n->name == kNumpyScalar && n->tensor.dim() == 0 &&
+         !n->tensor.is_complex();
+}
+
 const char* node_type_name(const Node* n) {
   switch (n->t) {
     case Node::T::None:
@@ -536,7 +545,7 @@ class Converter {
         std::unordered_map<std::string, size_t> seen;
         for (Node* item : n->items) {
           if (seen.emplace(key_of(item, depth + 1), items.size()).second)
-            items.push_back(convert(item, depth + 1));
+            items.push_back(key_value(item, depth + 1));
         }
         return Value::set(std::move(items));
       }
@@ -547,7 +556,7 @@ class Converter {
           const auto [it, fresh] = seen.emplace(key_of(n->items[k], depth + 1), entries.size());
           Value value = convert(n->items[k + 1], depth + 1);
           if (fresh) {
-            entries.emplace_back(convert(n->items[k], depth + 1), std::move(value));
+            entries.emplace_back(key_value(n->items[k], depth + 1), std::move(value));
           } else {
             entries[it->second].second = std::move(value);  // Python keeps the first key
           }
@@ -583,6 +592,31 @@ class Converter {
     return std::string(n->text);
   }
 
+  // A numpy scalar as the plain Python value it equals: bool, int or float.
+  static Value plain_value(const Node* n) {
+    const auto& t = n->tensor;
+    if (t.scalar_type() == torch::kBool) return Value::boolean(t.item<bool>());
+    if (t.is_floating_point()) return Value::floating(t.item<double>());
+    return Value::integer(t.item<int64_t>());
+  }
+  static std::string plain_key(const Node* n) {
+    const auto& t = n->tensor;
+    if (!t.is_floating_point()) return "i" + std::to_string(t.item<int64_t>()) + ";";
+    return float_key(t.item<double>(), n);
+  }
+  // NaN equals only itself (the same object), so its key is the node's identity.
+  static std::string float_key(double f, const Node* identity) {
+    if (std::isfinite(f) && f == std::floor(f) && std::fabs(f) < 9.2e18) {
+      return "i" + std::to_string(static_cast<int64_t>(f)) + ";";
+    }
+    if (std::isnan(f)) return "nan@" + std::to_string(reinterpret_cast<uintptr_t>(identity)) + ";";
+    uint64_t bits = 0;
+    std::memcpy(&bits, &f, sizeof bits);
+    return "f" + std::to_string(bits) + ";";
+  }
+  // Dict keys and set elements: numpy scalars become the equal plain value.
+  Value key_value(Node* n, int depth) { return is_numpy_scalar(n) ? plain_value(n) : convert(n, depth); }
+
   // Python's hash equality for the key types pickles use (1 == 1.0 == True).
   std::string key_of(const Node* n, int depth) {
     if (depth > kMaxDepth)
@@ -597,16 +631,8 @@ class Converter {
       case Node::T::Bool:
       case Node::T::Int:
         return "i" + std::to_string(n->i) + ";";
-      case Node::T::Float: {
-        const double f = n->f;
-        if (std::isfinite(f) && f == std::floor(f) && std::fabs(f) < 9.2e18) {
-          return "i" + std::to_string(static_cast<int64_t>(f)) + ";";
-        }
-        if (std::isnan(f)) return "nan@" + std::to_string(reinterpret_cast<uintptr_t>(n)) + ";";
-        uint64_t bits = 0;
-        std::memcpy(&bits, &f, sizeof bits);
-        return "f" + std::to_string(bits) + ";";
-      }
+      case Node::T::Float:
+        return float_key(n->f, n);
       case Node::T::Str:
         return "s" + std::to_string(n->text.size()) + ":" + std::string(n->text);
       case Node::T::Bytes:
@@ -629,6 +655,9 @@ class Converter {
         return "g" + n->name + ";";
       case Node::T::DType:
         return "d" + n->dtype.descr() + ";";
+      case Node::T::Array:
+        if (is_numpy_scalar(n)) return plain_key(n);
+        [[fallthrough]];
       default:
         th::fail(name_, ": unhashable ", describe(n), " (made at byte ", n->pos,
                  ") used as a dict key or set element");
@@ -1022,6 +1051,7 @@ class Unpickler {
         const std::string_view data = raw_bytes(a[1], storage, "numpy scalar data");
         Node* n = make(Node::T::Array);
         n->tensor = array_from(data, a[0]->dtype, {}, false);
+        n->name = kNumpyScalar;  // hashable, unlike a 0-d ndarray
         return n;
       }
       case Global::FromBuffer: {

@@ -4,9 +4,11 @@
 #include <torch/torch.h>
 
 #include <algorithm>
+#include <sstream>
 #include <unordered_map>
 
 #include "core/error.hpp"
+#include "io/bytes.hpp"
 #include "io/npy.hpp"
 #include "io/pickle.hpp"
 #include "model/transhuman.hpp"
@@ -135,6 +137,10 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   ext.globals["torch._utils._rebuild_parameter_with_state"] = [](const Value::List& a) {
     return a.at(0);
   };
+  // torch.__version__ saved in a checkpoint: a str subclass, read as its text.
+  ext.globals["torch.torch_version.TorchVersion"] = [](const Value::List& a) {
+    return a.empty() ? Value::str("") : a[0];
+  };
   ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
   for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
                         "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
@@ -201,7 +207,9 @@ void save_model_weights(const TransHumanImpl& model, const std::filesystem::path
   torch::serialize::OutputArchive archive;
   for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
   for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
-  archive.save_to(path.string());
+  std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
+  archive.save_to(bytes);
+  io::detail::write_file_atomic(path, bytes.str());
 }
 
 void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path) {

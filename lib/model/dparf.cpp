@@ -42,9 +42,9 @@ torch::Tensor DPaRF::field_encodings(const TokenFrames& frames, const torch::Ten
                                      const torch::Tensor& index) const {
   const auto n = index.size(0), k = index.size(1);
   if (config_.coordinate == "absolute")
-    return sincos_encoding(xs, config_.pe_freqs, true).unsqueeze(1).expand({n, k, coord_dim()});
+    return sincos_encoding(xs, config_.pe_freqs, true, fused()).unsqueeze(1).expand({n, k, coord_dim()});
   const auto l = local_coordinates(frames, xs, index);
-  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true).view({n, k, -1});
+  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true, fused()).view({n, k, -1});
 }
 
 namespace {
@@ -53,8 +53,8 @@ namespace {
 // softmax(-d / T) weights, local coordinates and the arguments x * f + phase of their encoding.
 template <class T>
 void nearest_fields(const T* xs, const T* origins, const T* rotations, int64_t nt, int64_t nk, double temperature,
-                    const T* freqs, const T* phases, int64_t nf2, int64_t n_begin, int64_t n_end, int64_t* out_idx,
-                    T* out_w, T* out_local, T* out_args) {
+                    const T* freqs, const T* phases, int64_t nf2, bool fused, int64_t n_begin, int64_t n_end,
+                    int64_t* out_idx, T* out_w, T* out_local, T* out_args) {
   std::vector<T> best_d(nk);
   std::vector<int64_t> best_i(nk);
   for (int64_t n = n_begin; n < n_end; ++n) {
@@ -89,8 +89,12 @@ void nearest_fields(const T* xs, const T* origins, const T* rotations, int64_t n
         T* a = out_args + (n * nk + k) * nf2 * 3;
         for (int64_t f = 0; f < nf2; ++f)
           for (int i = 0; i < 3; ++i) {
-            const T product = l[i] * freqs[f];  // rounded, then the phase added (no FMA)
-            a[f * 3 + i] = product + phases[f];
+            if (fused) {  // rounded once, as the reference's addcmul [parity]
+              a[f * 3 + i] = std::fma(l[i], freqs[f], phases[f]);
+            } else {
+              const T product = l[i] * freqs[f];  // rounded, then the phase added
+              a[f * 3 + i] = product + phases[f];
+            }
           }
       }
     }
@@ -126,13 +130,13 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
     at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
       nearest_fields<scalar_t>(x.data_ptr<scalar_t>(), O.data_ptr<scalar_t>(), R.data_ptr<scalar_t>(), nt, nk,
                                config_.softmax_temperature, freqs.data_ptr<scalar_t>(),
-                               phases.data_ptr<scalar_t>(), nf2, begin, end, q.index.data_ptr<int64_t>(),
+                               phases.data_ptr<scalar_t>(), nf2, fused(), begin, end, q.index.data_ptr<int64_t>(),
                                q.weight.data_ptr<scalar_t>(), relative ? local.data_ptr<scalar_t>() : nullptr,
                                relative ? args.data_ptr<scalar_t>() : nullptr);
     });
   });
   if (config_.coordinate == "absolute") {
-    q.coords = sincos_encoding(x, config_.pe_freqs, true);
+    q.coords = sincos_encoding(x, config_.pe_freqs, true, fused());
   } else if (relative) {
     // g_k = [l_k, sin(args)]; coords = sum_k w_k g_k.
     args.sin_();
@@ -175,7 +179,7 @@ FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& 
   const auto dist = diff.norm(2, -1);
   q.weight = torch::softmax(-dist / config_.softmax_temperature, 1);
   if (config_.coordinate == "absolute") {
-    q.coords = sincos_encoding(xs, config_.pe_freqs, true);
+    q.coords = sincos_encoding(xs, config_.pe_freqs, true, fused());
   } else if (config_.coordinate == "relative") {
     const auto g = field_encodings(frames, xs, q.index);  // (N, Nk, G)
     q.coords = torch::bmm(q.weight.unsqueeze(1), g).squeeze(1);

@@ -51,6 +51,7 @@ class DPaRF {
   const DPaRFConfig& config() const { return config_; }
 
  private:
+  bool fused() const { return config_.pe_rounding == "fused"; }  // SPEC 3.3 [parity]
   // Per-field encodings g_k: (N, Nk, G).
   torch::Tensor field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
                                 const torch::Tensor& index) const;

@@ -2,6 +2,8 @@
 
 #include <torch/torch.h>
 
+#include <ATen/Parallel.h>
+
 #include <cmath>
 
 namespace th::model {
@@ -26,20 +28,27 @@ torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool in
   const auto freqs = pe_frequencies(num_freqs, x.options()).view({1, -1, 1});
   const auto phases = pe_phases(num_freqs, x.options()).view({1, -1, 1});
   torch::Tensor embed;
-  if (fused) {
-    TORCH_CHECK(x.device().is_cpu() && x.scalar_type() == torch::kFloat,
-                "the fused positional encoding is computed on CPU float tensors");
-    embed = torch::empty({n, 2 * num_freqs, dims}, x.options());
+  if (fused && x.device().is_cpu()) {
+    // The argument x * f + phase rounded once (IEEE fma, whatever the CPU), then the same
+    // vectorised sin as the reference's torch.sin.
+    auto args = torch::empty({n, 2 * num_freqs, dims}, x.options());
     const auto xc = x.contiguous();
-    const float* xp = xc.data_ptr<float>();
     const auto fc = freqs.flatten().contiguous(), pc = phases.flatten().contiguous();
-    const float* fp = fc.data_ptr<float>();
-    const float* pp = pc.data_ptr<float>();
-    float* e = embed.data_ptr<float>();
-    for (int64_t i = 0; i < n; ++i)
-      for (int64_t k = 0; k < 2 * num_freqs; ++k)
-        for (int64_t d = 0; d < dims; ++d)
-          e[(i * 2 * num_freqs + k) * dims + d] = std::sin(std::fmaf(xp[i * dims + d], fp[k], pp[k]));
+    AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "sincos_encoding_fused", [&] {
+      const scalar_t* xp = xc.data_ptr<scalar_t>();
+      const scalar_t* fp = fc.data_ptr<scalar_t>();
+      const scalar_t* pp = pc.data_ptr<scalar_t>();
+      scalar_t* a = args.data_ptr<scalar_t>();
+      at::parallel_for(0, n, 1024, [&](int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; ++i)
+          for (int64_t k = 0; k < 2 * num_freqs; ++k)
+            for (int64_t d = 0; d < dims; ++d)
+              a[(i * 2 * num_freqs + k) * dims + d] = std::fma(xp[i * dims + d], fp[k], pp[k]);
+      });
+    });
+    embed = args.sin_();
+  } else if (fused) {
+    embed = torch::sin(torch::addcmul(phases, x.unsqueeze(1), freqs));  // fused on GPUs
   } else {
     embed = torch::sin(x.unsqueeze(1) * freqs + phases);
   }

@@ -13,9 +13,9 @@ torch::Tensor pe_frequencies(int64_t num_freqs, const torch::TensorOptions& opti
 torch::Tensor pe_phases(int64_t num_freqs, const torch::TensorOptions& options);
 
 // x: (N, 3) -> (N, [3 +] 6 * num_freqs): [x,] sin(f0 x), cos(f0 x), sin(f1 x), ...
-// Each value is sin(x * f + phase) with the product and the sum rounded separately (as numpy
-// or an unfused float computation does). With `fused` the product and sum are rounded once
-// (fused multiply-add), which is what PyTorch's addcmul produces on FMA hardware; CPU only.
+// Each value is sin(x * f + phase). `fused` (the default of model.transhe/dparf.pe_rounding,
+// SPEC 3.2 [parity]) rounds x * f + phase once, as the reference's torch.addcmul does with a
+// fused multiply-add; otherwise the product and the sum are rounded separately (numpy).
 torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool include_input,
                               bool fused = false);
 

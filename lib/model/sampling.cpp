@@ -15,7 +15,8 @@ namespace F = torch::nn::functional;
 // s == S, where upsampling is the identity).
 std::pair<torch::Tensor, torch::Tensor> axis_taps(const torch::Tensor& x_in, int64_t s, int64_t S) {
   // grid_sample, border padding: clamp to the image, then the two neighbouring image pixels.
-  const auto x = x_in.clamp(0, static_cast<double>(S - 1));
+  // NaN (a non-finite camera or point) reads texel 0 instead of an index out of range.
+  const auto x = torch::nan_to_num(x_in, 0.0).clamp(0, static_cast<double>(S - 1));
   const auto i0 = x.floor().clamp(0, static_cast<double>(std::max<int64_t>(S - 2, 0)));
   const auto f = x - i0;
   if (s == S) {
@@ -173,7 +174,7 @@ struct WeightedGather : torch::autograd::Function<WeightedGather> {
 // The scalar version of axis_taps (same operations in the same precision).
 template <class T>
 int axis_taps_scalar(T x, int64_t s, int64_t S, int64_t* idx, T* w) {
-  x = std::min(std::max(x, T(0)), static_cast<T>(S - 1));
+  x = x >= T(0) ? std::min(x, static_cast<T>(S - 1)) : T(0);  // NaN -> 0, never out of range
   const T i0 = std::min(std::max(std::floor(x), T(0)), static_cast<T>(std::max<int64_t>(S - 2, 0)));
   const T f = x - i0;
   if (s == S) {

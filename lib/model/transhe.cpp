@@ -105,9 +105,7 @@ TransHEImpl::TransHEImpl(const TransHEConfig& config_) : config(config_) {
 }
 
 torch::Tensor TransHEImpl::encode_positions(const torch::Tensor& positions) const {
-  if (config.pe_rounding == "fused" && positions.scalar_type() == torch::kFloat)
-    return sincos_encoding(positions.cpu(), config.pe_freqs, false, true).to(positions.device());
-  return sincos_encoding(positions, config.pe_freqs, false);
+  return sincos_encoding(positions, config.pe_freqs, false, config.pe_rounding == "fused");
 }
 
 torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Tensor& positions) {

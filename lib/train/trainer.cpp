@@ -18,6 +18,7 @@
 #include "data/dataset.hpp"
 #include "data/sampler.hpp"
 #include "dist/communicator.hpp"
+#include "io/bytes.hpp"
 #include "metrics/lpips.hpp"
 #include "metrics/metrics.hpp"
 #include "model/checkpoint_import.hpp"
@@ -67,13 +68,16 @@ void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::
                      const CheckpointState& st) {
   torch::serialize::OutputArchive root;
   write_checkpoint(root, model, optim, st);
-  const fs::path tmp = path.string() + ".tmp";
+  // Serialised in memory, then written by write_file_atomic: a failing write (disk full) is an
+  // error naming the file and leaves no partial file (LibTorch's file writer would throw from its
+  // destructor and terminate the process).
+  std::ostringstream archive;
   try {
-    root.save_to(tmp.string());
+    root.save_to(archive);
   } catch (const c10::Error& e) {
-    fail("cannot write checkpoint '", tmp.string(), "': ", e.what_without_backtrace());
+    fail("cannot serialise checkpoint '", path.string(), "': ", e.what_without_backtrace());
   }
-  fs::rename(tmp, path);
+  io::detail::write_file_atomic(path, archive.str());
 }
 
 CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,

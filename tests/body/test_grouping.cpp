@@ -1,6 +1,10 @@
 #include <catch2/catch.hpp>
 
+#include <fstream>
+
 #include "body/grouping.hpp"
+#include "io/npy.hpp"
+#include "io/pickle.hpp"
 #include "support/test_env.hpp"
 
 using namespace th::body;
@@ -89,4 +93,69 @@ TEST_CASE("the grouping kind of the config selects the implementation", "[groupi
   // Observation-space labels follow the posed points: a stretched pose groups differently.
   const auto posed = pts * torch::tensor({2.0, 1.0, 1.0}, torch::kFloat64);
   CHECK_FALSE(torch::equal(obs->labels(pts, pts), obs->labels(pts, posed)));
+}
+
+TEST_CASE("the reference's k-means file (numpy-scalar dict keys) loads with numpy's labels", "[grouping][parity]") {
+  // SPEC 2.5: kmeans_dict_300.npy as the reference ships it; np.save of a dict whose
+  // dict_voxel2pc_ind is keyed by numpy.int32 scalars (refused as unhashable before).
+  const auto dir = th::test::scratch_dir("kmeans_reference_file");
+  const int64_t nv = 300, clusters = 24;
+  REQUIRE(th::test::run_python("tests/python/kmeans_reference.py",
+                               dir.string() + " " + std::to_string(nv) + " " + std::to_string(clusters)) == 0);
+  const auto labels = load_reference_kmeans(dir / "kmeans_dict.npy", nv);
+  std::ifstream expected((dir / "labels.txt").string());
+  std::vector<int64_t> numpy_labels;
+  for (int64_t l; expected >> l;) numpy_labels.push_back(l);
+  REQUIRE(int64_t(numpy_labels.size()) == nv);
+  CHECK(torch::equal(labels, torch::tensor(numpy_labels)));  // every label used: no compaction
+
+  // The grouping with kmeans_file set takes those labels.
+  th::GroupingConfig g;
+  g.num_tokens = clusters;
+  g.kmeans_file = (dir / "kmeans_dict.npy").string();
+  CHECK(torch::equal(make_grouping(g)->labels(torch::rand({nv, 3}, torch::kFloat64), {}), labels));
+
+  // The dict of groups reads with plain integer keys equal to numpy's.
+  const auto value = th::io::read_npy_value(dir / "kmeans_dict.npy");
+  const auto& groups = value["dict_voxel2pc_ind"].as_dict();
+  std::ifstream g_expected((dir / "groups.txt").string());
+  size_t i = 0;
+  for (int64_t key, count, first; g_expected >> key >> count >> first; ++i) {
+    REQUIRE(i < groups.size());
+    INFO("group " << i);
+    CHECK(groups[i].first.kind() == th::io::Value::Kind::Int);
+    CHECK(groups[i].first.as_int() == key);
+    CHECK(groups[i].second.as_tensor().numel() == count);
+    CHECK(groups[i].second.as_tensor()[0].item<int64_t>() == first);
+  }
+  CHECK(i == groups.size());
+}
+
+TEST_CASE("numpy scalars of every integer, bool and float dtype are plain dict keys", "[grouping][parity]") {
+  const auto dir = th::test::scratch_dir("numpy_scalar_keys");
+  REQUIRE(th::test::run_python("tests/python/kmeans_reference.py", dir.string() + " 30 4") == 0);
+  const auto value = th::io::read_npy_value(dir / "scalar_keys.npy");
+  const auto& d = value.as_dict();
+  std::ifstream expected((dir / "scalar_keys.txt").string());
+  size_t i = 0;
+  for (std::string kind, text; expected >> kind >> text; ++i) {
+    int64_t index = -1;
+    expected >> index;
+    REQUIRE(i < d.size());
+    INFO("key " << i << ": " << kind << " " << text);
+    const auto& key = d[i].first;
+    if (kind == "b") {
+      CHECK(key.kind() == th::io::Value::Kind::Bool);
+      CHECK(key.as_int() == std::stoll(text));
+    } else if (kind == "f") {
+      CHECK(key.kind() == th::io::Value::Kind::Float);
+      CHECK(key.as_float() == std::stod(text));
+    } else {
+      CHECK(key.kind() == th::io::Value::Kind::Int);
+      CHECK(key.as_int() == std::stoll(text));
+    }
+    CHECK(d[i].second.as_int() == index);
+  }
+  CHECK(i == d.size());
+  CHECK(i == 14);
 }

@@ -40,9 +40,11 @@ void write_annots(const fs::path& root, const std::string& name, int frames, int
                           Value::dict({{Value::str("cams"), cams}, {Value::str("ims"), Value::list(ims)}}));
 }
 
-size_t samples(const fs::path& root, const std::string& split, const std::string& setting) {
+size_t samples(const fs::path& root, const std::string& split, const std::string& setting,
+               const std::string& dataset = "zju_mocap") {
   th::DataConfig c;
   c.root = root.string();
+  c.dataset = dataset;
   c.split_file = split;
   auto smpl = std::make_shared<const th::body::SmplModel>();
   return th::data::Dataset(c, setting, th::data::Dataset::Mode::Test, smpl).size();
@@ -72,7 +74,18 @@ TEST_CASE("the H36M cross-dataset split has 54 target images", "[split]") {
   for (const auto& [name, frames] : std::vector<std::pair<std::string, int>>{
            {"S1", 750}, {"S5", 1250}, {"S6", 750}, {"S7", 1500}, {"S8", 1250}, {"S9", 1300}, {"S11", 1000}})
     write_annots(root / name, "Posing", frames, 4);  // Animatable NeRF's <S>/Posing layout
-  CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset") == 54);
+  CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset", "h36m") == 54);
+  // data.dataset names the layout: the H36M folders read as ZJU-MoCap fail naming the key.
+  CHECK_THROWS_WITH(samples(root, "data_splits/h36m.yaml", "cross_dataset", "zju_mocap"),
+                    Catch::Contains((root / "S1" / "annots.npy").string()) && Catch::Contains("data.dataset: h36m"));
+}
+
+TEST_CASE("ZJU-MoCap folders read as H36M fail naming data.dataset", "[split]") {
+  const fs::path root = th::test::scratch_dir("zju_as_h36m");
+  write_annots(root, "CoreView_387", 30, 23);
+  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity", "h36m"),
+                    Catch::Contains((root / "CoreView_387" / "Posing" / "annots.npy").string()) &&
+                        Catch::Contains("data.dataset: zju_mocap"));
 }
 
 TEST_CASE("an unknown setting or a missing human folder is named in the error", "[split]") {

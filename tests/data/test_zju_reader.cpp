@@ -163,10 +163,45 @@ TEST_CASE("bad data fails with an error naming the file", "[dataset][errors]") {
     std::ofstream(img, std::ios::binary | std::ios::trunc) << "not a jpeg";
     CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(img.string()) && Catch::Contains("corrupt"));
   }
+  SECTION("a truncated image") {
+    const fs::path img = root / "CoreView_s03" / "Camera_B4" / "000000.jpg";
+    std::ifstream in(img, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    in.close();
+    std::ofstream(img, std::ios::binary | std::ios::trunc) << bytes.substr(0, bytes.size() * 2 / 3);
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(img.string()) && Catch::Contains("truncated"));
+  }
+  SECTION("mask and mask_cihp of different sizes") {
+    const fs::path a = root / "CoreView_s03" / "mask" / "Camera_B1" / "000000.png";
+    const fs::path b = root / "CoreView_s03" / "mask_cihp" / "Camera_B1" / "000000.png";
+    const fs::path present = fs::exists(a) ? a : b, other = fs::exists(a) ? b : a;
+    fs::create_directories(other.parent_path());
+    cv::imwrite(other.string(), cv::Mat::zeros(17, 23, CV_8U));
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(other.string()) && Catch::Contains("23x17"));
+  }
   SECTION("a missing mask") {
     fs::remove_all(root / "CoreView_s03" / "mask");
     fs::remove_all(root / "CoreView_s03" / "mask_cihp");
     CHECK_THROWS_WITH(load_first("identity"), Catch::Contains("no mask for"));
+  }
+  SECTION("a non-finite vertex") {
+    const fs::path file = root / "CoreView_s03" / "new_vertices" / "0.npy";
+    auto v = th::io::read_npy(file).clone();
+    v[5][1] = std::nan("");
+    th::io::write_npy(file, v);
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) && Catch::Contains("nan") &&
+                                                  Catch::Contains("index 16"));
+  }
+  SECTION("a non-finite global translation") {
+    th::io::Value::Dict d;
+    d.emplace_back(th::io::Value::str("poses"), th::io::Value::array(torch::zeros({1, 72}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Rh"), th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Th"), th::io::Value::array(torch::full({1, 3}, INFINITY, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("shapes"), th::io::Value::array(torch::zeros({1, 10}, torch::kFloat64)));
+    const fs::path file = root / "CoreView_s03" / "new_params" / "0.npy";
+    th::io::write_npy_value(file, th::io::Value::dict(d));
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) && Catch::Contains("'Th'") &&
+                                                  Catch::Contains("inf"));
   }
   SECTION("a vertices file of another body model") {
     const fs::path file = root / "CoreView_s03" / "new_vertices" / "0.npy";
@@ -190,4 +225,82 @@ TEST_CASE("the prefetcher returns the samples of its order and rethrows load err
   Prefetcher bad(ds, {0, 999999}, {0, 0}, 1, 2);
   CHECK_NOTHROW(bad.next());
   CHECK_THROWS(bad.next());
+}
+
+TEST_CASE("visibility files are found by frame number, zero-padded like the renamed images", "[dataset][visibility][parity]") {
+  const fs::path root = copy_of_tiny("visibility_files");
+  const fs::path vis_root = root / "zju_rasterization";
+  // The zju_rasterization names: Camera_B<k>/%06d.npy, and for CoreView_313/315 (whose images
+  // keep their original long names here) Camera (<k>)/%04d.npy of the 1-based frame number.
+  const auto h313 = HumanSequence::open(root / "CoreView_313");
+  CHECK(h313->image_path(0, 0).filename().string().rfind("CoreView_313_Camera_(1)_0001", 0) == 0);
+  CHECK(visibility_file(vis_root, *h313, 0, 0) == vis_root / "CoreView_313" / "visibility" / "Camera (1)" / "0001.npy");
+  CHECK(visibility_file(vis_root, *h313, 1, 2) == vis_root / "CoreView_313" / "visibility" / "Camera (3)" / "0002.npy");
+  const auto s03 = HumanSequence::open(root / "CoreView_s03");
+  CHECK(visibility_file(vis_root, *s03, 0, 4) == vis_root / "CoreView_s03" / "visibility" / "Camera_B5" / "000000.npy");
+
+  // Files for every view of every person: the dataset reads them as they are.
+  auto c = tiny_config(root);
+  c.visibility = "files";
+  c.visibility_root = vis_root.string();
+  const auto smpl = load_body_model(c);
+  const int64_t nv = smpl->num_vertices();
+  torch::manual_seed(3);
+  std::map<fs::path, torch::Tensor> written;
+  for (const char* name : {"CoreView_313", "CoreView_396", "CoreView_s03"}) {
+    const auto human = HumanSequence::open(root / name);
+    for (int f = 0; f < human->num_frames(); ++f)
+      for (int k = 0; k < human->num_cameras(); ++k) {
+        const fs::path file = visibility_file(vis_root, *human, f, k);
+        fs::create_directories(file.parent_path());
+        const auto vis = torch::rand({nv}) < 0.5;
+        th::io::write_npy(file, vis);
+        written[file] = vis;
+      }
+  }
+  const Dataset ds(c, "identity", Dataset::Mode::Test, smpl);
+  const Sample s = ds.load(0, 0);
+  const auto human = ds.humans()[0];
+  for (size_t v = 0; v < s.reference_views.size(); ++v)
+    CHECK(torch::equal(s.visibility[int64_t(v)], written.at(visibility_file(vis_root, *human, s.frame, s.reference_views[v]))));
+
+  // A missing file is an error naming it, unless all-visible is asked for explicitly.
+  const fs::path missing = visibility_file(vis_root, *human, s.frame, s.reference_views[1]);
+  fs::remove(missing);
+  CHECK_THROWS_WITH(ds.load(0, 0), Catch::Contains(missing.string()) && Catch::Contains("missing"));
+  c.visibility_missing = "all_visible";
+  const Sample lenient = Dataset(c, "identity", Dataset::Mode::Test, smpl).load(0, 0);
+  CHECK(lenient.visibility[1].all().item<bool>());
+  CHECK(torch::equal(lenient.visibility[0], s.visibility[0]));
+}
+
+TEST_CASE("the target mask's border band is marked before undistortion, as the reference does", "[dataset][parity]") {
+  // SPEC 2.1 step 6 [parity]: band on the distorted mask, then both undistorted (bilinear), so
+  // edge pixels hold blends of 0, 1 and 100; the background is black where the result is 0.
+  const fs::path root = copy_of_tiny("band_parity");
+  const fs::path dir = root / "CoreView_s03";
+  REQUIRE(th::test::run_python("tests/python/view_reference.py", "distort " + dir.string() + " -0.3 0.1") == 0);
+  const fs::path out = th::test::scratch_dir("band_parity_out");
+  REQUIRE(th::test::run_python("tests/python/view_reference.py", "view " + dir.string() + " 0 0 0.5 " + out.string()) == 0);
+  const auto ref_mask = th::io::read_npy(out / "mask.npy");
+  const auto ref_image = th::io::read_npy(out / "image.npy");
+
+  const auto human = HumanSequence::open(dir);
+  ViewOptions o;
+  o.ratio = 0.5;
+  o.border_band = true;
+  const ViewImage view = load_view(*human, 0, 0, o);
+  const auto mask = torch::from_blob(view.mask.data, {view.mask.rows, view.mask.cols}, torch::kUInt8).clone();
+  const auto image = torch::from_blob(view.rgb.data, {view.rgb.rows, view.rgb.cols, 3}, torch::kFloat32).clone();
+  REQUIRE(mask.sizes() == ref_mask.sizes());
+  CHECK(torch::equal(mask, ref_mask));
+  CHECK(torch::equal(image, ref_image));
+  const auto blended = (mask != 0) & (mask != 1) & (mask != 100);
+  CHECK(blended.sum().item<int64_t>() > 0);  // interpolated band and edge values
+
+  // Marking the band after undistortion (the non-default order) gives another mask.
+  o.band_before_undistort = false;
+  const ViewImage other = load_view(*human, 0, 0, o);
+  const auto other_mask = torch::from_blob(other.mask.data, {other.mask.rows, other.mask.cols}, torch::kUInt8).clone();
+  CHECK_FALSE(torch::equal(other_mask, ref_mask));
 }

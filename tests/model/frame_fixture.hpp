@@ -157,6 +157,7 @@ inline torch::Tensor read_raw(const std::string& path, torch::IntArrayRef shape,
 class PythonReference {
  public:
   explicit PythonReference(const std::string& name) : dir_(scratch_dir(name)) {}
+  const std::filesystem::path& dir() const { return dir_; }
 
   void add(const std::string& name, const torch::Tensor& t) {
     const auto c = t.detach().cpu().contiguous();

@@ -142,3 +142,79 @@ TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip
   io::write_npz(dir / "broken.npz", resnet);
   CHECK_THROWS_WITH(load_pretrained_encoder(*b->encoder, dir / "broken.npz"), Catch::Contains("layer1.0.conv1.weight"));
 }
+
+TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", "[model][checkpoint][parity]") {
+  // SPEC 3.2 [parity]: PyTorch's addcmul rounds x * f + phase once; at frequencies up to
+  // 2^31 pi that decides the value. The table here is computed by the installed PyTorch.
+  torch::manual_seed(2);
+  const auto x = (torch::rand({300, 3}) * 2 - 1) * 0.9;
+  test::PythonReference py("pe_fused_table");
+  py.add("x", x);
+  const auto table = py.run("pe_fused").at("pe32");
+  const TransHE vit(TransHEConfig{});
+  const auto ours = vit->encode_positions(x);
+  REQUIRE(ours.sizes() == table.sizes());
+  CHECK(torch::equal(ours, table));
+  // The separately rounded form (the old default) is another table.
+  TransHEConfig separate;
+  separate.pe_rounding = "separate";
+  const auto other = TransHE(separate)->encode_positions(x);
+  CHECK((other != table).sum().item<int64_t>() > 100);
+}
+
+TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end", "[model][checkpoint][parity]") {
+  // The Python side (tests/python/model_reference.py render, written from SPEC.md in PyTorch)
+  // loads the .pth that torch.save wrote and renders the rays of a small frame; the C++ import of
+  // the same file, with the default configuration, must give the same density, colour, acc and
+  // depth per ray.
+  const auto& dir = fixtures();
+  const auto f = test::synthetic_frame(300, 24, 3, 32, 4);
+  auto rays = test::target_rays(f, 16);
+  const auto pick = torch::arange(0, rays.size(), std::max<int64_t>(1, rays.size() / 40));
+  rays = rays.index(pick);
+  REQUIRE(rays.size() >= 20);
+
+  TransHuman model(ModelConfig{});
+  import_reference_checkpoint(*model, dir / "full.pth");
+  model->eval();
+  torch::NoGradGuard no_grad;
+  const RenderConfig rc;  // defaults: 64 samples, progressive
+  const auto cache = model->prepare(f.inputs);
+  const auto ours = render_rays(*model, cache, rays, rc);
+  // Raw density of every sample (culled samples compared as 0 below).
+  const int64_t S = rc.samples;
+  const auto t = torch::linspace(0, 1, S);
+  const auto z = rays.near.unsqueeze(1) * (1 - t) + rays.far.unsqueeze(1) * t;
+  const auto pts = (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2)).reshape({-1, 3});
+  const auto dirs = rays.directions.unsqueeze(1).expand({-1, S, 3}).reshape({-1, 3});
+  const auto sigma = model->forward(cache, pts, dirs).select(1, 3).view({-1, S});
+
+  test::PythonReference py("render_end_to_end");
+  const auto& in = f.inputs;
+  for (const auto& [name, tensor] : std::vector<std::pair<std::string, torch::Tensor>>{
+           {"ref_images", in.ref_images}, {"K", in.K}, {"R", in.R}, {"T", in.T}, {"vertices", in.vertices},
+           {"Rh", in.Rh}, {"Th", in.Th}, {"A", in.A}, {"canonical", in.canonical},
+           {"visibility", in.visibility.to(torch::kLong)}, {"labels", in.labels}, {"origins", rays.origins},
+           {"directions", rays.directions}, {"near", rays.near}, {"far", rays.far},
+           {"samples", torch::tensor({S})}, {"cull", torch::tensor({rc.cull_distance}, torch::kDouble)}})
+    py.add(name, tensor);
+  std::ofstream((py.dir() / "checkpoint.txt").string()) << (dir / "full.pth").string();
+  const auto ref = py.run("render");
+
+  const auto kept = ref.at("kept").to(torch::kBool);
+  INFO(rays.size() << " rays, " << kept.sum().item<int64_t>() << " of " << kept.numel() << " samples near the body");
+  REQUIRE(kept.any().item<bool>());
+  const auto sigma_diff = (torch::where(kept, sigma, torch::zeros_like(sigma)) - ref.at("sigma")).abs().max().item<double>();
+  const auto rgb_diff = (ours.rgb - ref.at("rgb")).abs().max().item<double>();
+  const auto acc_diff = (ours.acc - ref.at("acc")).abs().max().item<double>();
+  const auto depth_diff = (ours.depth - ref.at("depth")).abs().max().item<double>();
+  INFO("max |diff|: sigma " << sigma_diff << ", rgb " << rgb_diff << ", acc " << acc_diff << ", depth " << depth_diff);
+  CHECK(sigma_diff <= 1e-5);
+  CHECK(rgb_diff <= 1e-5);
+  CHECK(acc_diff <= 1e-5);
+  CHECK(depth_diff <= 1e-5);
+  // Not a vacuous comparison: the rays carry opacity and colour well above the tolerance.
+  CHECK(ref.at("acc").max().item<double>() > 0.01);
+  CHECK(ref.at("rgb").max().item<double>() > 0.005);
+  CHECK(ref.at("sigma").abs().max().item<double>() > 0.1);
+}

@@ -13,6 +13,7 @@
 #include "support/test_env.hpp"
 
 using namespace th;
+using namespace th::model;
 
 namespace {
 

@@ -162,7 +162,7 @@ def cmd_vit(a):
 
     t = {k: torch.from_numpy(v.copy()) for k, v in a.items()}
     depth, heads = int(a["depth"][0]), int(a["heads"][0])
-    x = t["tokens"] + torch.from_numpy(sincos(a["positions"], 32, False))[None]
+    x = t["tokens"] + reference_pe(t["positions"], 32, False)[None]  # the reference's addcmul (fused)
     B, N, C = x.shape
     for i in range(depth):
         p = lambda n: t[f"blocks.{i}.{n}"]
@@ -179,7 +179,134 @@ def cmd_vit(a):
     return {"out": x.numpy()}
 
 
+def reference_pe(x, num_freqs, include_input):
+    """The reference's PositionalEncoding: sin(addcmul(phases, x, freqs)) in float32 (SPEC 3.2)."""
+    import torch
+
+    freqs = torch.repeat_interleave(math.pi * 2.0 ** torch.arange(0, num_freqs), 2).view(1, -1, 1).float()
+    phases = torch.zeros(2 * num_freqs)
+    phases[1::2] = math.pi * 0.5
+    emb = x.unsqueeze(1).repeat(1, 2 * num_freqs, 1)
+    emb = torch.sin(torch.addcmul(phases.view(1, -1, 1), emb, freqs)).view(x.shape[0], -1)
+    return torch.cat([x, emb], -1) if include_input else emb
+
+
+def cmd_pe_fused(a):
+    """The token PE table of the reference (torch.addcmul, fused rounding) for the positions given."""
+    import torch
+
+    return {"pe32": reference_pe(torch.from_numpy(a["x"].copy()), 32, False).numpy()}
+
+
+def cmd_render(a):
+    """End to end (SPEC 2.2, 3, 4): a reference-format checkpoint saved by torch.save renders the
+    given rays of one frame. Every stage is written here from SPEC.md, in PyTorch; nothing comes
+    from the C++ code but the frame's inputs and the rays."""
+    import torch
+    import torch.nn.functional as F
+    import torchvision
+
+    ckpt = torch.load(open(os.path.join(DIR, "checkpoint.txt")).read().strip(), map_location="cpu")
+    sd = ckpt["net"] if "net" in ckpt else ckpt
+    t = {k: torch.from_numpy(v.copy()) for k, v in a.items()}
+    images, K, R, T = t["ref_images"], t["K"].double(), t["R"].double(), t["T"].double()
+    V, _, H, W = images.shape
+
+    def conv1d(name, x):  # Conv1d k=1 on (..., C) as the reference's (C, N) layout would give
+        return F.linear(x, sd[name + ".weight"][:, :, 0], sd[name + ".bias"])
+
+    # SPEC 3.1: ResNet-18 to layer2 with batch statistics, upsampled, colour channels, reduction.
+    net = torchvision.models.resnet18()
+    enc = {k[len("encoder.model."):]: v for k, v in sd.items() if k.startswith("encoder.model.")}
+    net.load_state_dict(enc, strict=False)
+    net.train()
+    with torch.no_grad():
+        l0 = net.relu(net.bn1(net.conv1(images)))
+        l1 = net.layer1(net.maxpool(l0))
+        l2 = net.layer2(l1)
+        ups = [F.interpolate(l, (H, W), mode="bilinear", align_corners=True) for l in (l0, l1, l2)]
+        color = F.conv2d(images, sd["encoder.upsample_color.weight"], sd["encoder.upsample_color.bias"])
+        pixel = torch.cat(ups + [color], 1)
+        holder = F.conv2d(pixel, sd["encoder.reduction_layer.weight"], sd["encoder.reduction_layer.bias"])
+
+        def project(pts):  # (N, 3) world -> (V, N, 2) pixels, SPEC 2.2
+            xc = torch.einsum("vij,nj->vni", R, pts.double()) + T[:, None, :, 0]
+            uvw = torch.einsum("vij,vnj->vni", K, xc)
+            return (uvw[..., :2] / uvw[..., 2:]).float()
+
+        def sample(feat, uv):  # grid_sample at uv * 2 / (size - 1) - 1 -> (V, N, C)
+            grid = torch.stack([uv[..., 0] * 2 / (W - 1) - 1, uv[..., 1] * 2 / (H - 1) - 1], -1)
+            out = F.grid_sample(feat, grid[:, None], mode="bilinear", padding_mode="border", align_corners=True)
+            return out[:, :, 0].permute(0, 2, 1)
+
+        # Painting, tokens (mean over every vertex of a cluster), positions, TransHE.
+        vertices, labels = t["vertices"], t["labels"]
+        painted = sample(holder, project(vertices)) * t["visibility"].float()[..., None]
+        nt = int(labels.max()) + 1
+        members = [labels == c for c in range(nt)]
+        tokens = torch.stack([painted[:, m].mean(1) for m in members], 1)
+        canonical = t["canonical"]  # float64
+        positions = torch.stack([canonical[m].mean(0) for m in members]) / 1.5
+        x = tokens + reference_pe(positions.float(), 32, False)[None]
+        depth = len({k.split(".")[2] for k in sd if k.startswith("ViT.blocks.")})
+        heads, C = 3, x.shape[-1]
+        B, N = x.shape[:2]
+        for i in range(depth):
+            p = lambda n: sd[f"ViT.blocks.{i}.{n}"]
+            y = F.layer_norm(x, (C,), p("norm1.weight"), p("norm1.bias"), eps=1e-6)
+            qkv = F.linear(y, p("attn.qkv.weight"), p("attn.qkv.bias")).reshape(B, N, 3, heads, C // heads).permute(2, 0, 3, 1, 4)
+            att = ((qkv[0] @ qkv[1].transpose(-2, -1)) * (C // heads) ** -0.5).softmax(-1)
+            x = x + F.linear((att @ qkv[2]).transpose(1, 2).reshape(B, N, C), p("attn.proj.weight"), p("attn.proj.bias"))
+            y = F.layer_norm(x, (C,), p("norm2.weight"), p("norm2.bias"), eps=1e-6)
+            x = x + F.linear(F.gelu(F.linear(y, p("mlp.fc1.weight"), p("mlp.fc1.bias"))), p("mlp.fc2.weight"), p("mlp.fc2.bias"))
+        tokens = F.layer_norm(x, (C,), sd["ViT.norm.weight"], sd["ViT.norm.bias"], eps=1e-6)
+
+        # DPaRF frames (SPEC 3.3): cluster means of the SMPL-frame vertices and of A.
+        Rh, Th = t["Rh"], t["Th"]
+        xs_vertices = (vertices - Th) @ Rh  # Rh^T (x - Th) per row
+        origins = torch.stack([xs_vertices[m].mean(0) for m in members])
+        rotations = torch.stack([t["A"][m].mean(0) for m in members])
+
+        # Rays (SPEC 4): 64 (or `samples`) points, no jitter; culling at the body distance.
+        S = int(a["samples"][0])
+        o, d, near, far = t["origins"], t["directions"], t["near"], t["far"]
+        tt = torch.linspace(0, 1, S)
+        z = near[:, None] * (1 - tt) + far[:, None] * tt
+        pts = (o[:, None] + d[:, None] * z[..., None]).reshape(-1, 3)
+        dirs = F.normalize(d, dim=-1)[:, None].expand(-1, S, -1).reshape(-1, 3)
+        near_body = torch.cdist(pts.double(), vertices.double()).min(1)[0] <= float(a["cull"][0])
+
+        xs = (pts - Th) @ Rh
+        dist = torch.cdist(xs, origins)
+        knn_d, knn = dist.topk(7, 1, largest=False, sorted=True)
+        w = F.softmax(-knn_d / 0.5, 1)
+        local = ((xs[:, None] - origins[knn])[:, :, None, :] @ rotations[knn])[:, :, 0]
+        g = reference_pe(local.reshape(-1, 3), 10, True).view(len(xs), 7, -1)
+        h = torch.stack([(w[..., None] * torch.cat([tokens[v][knn], g], -1)).sum(1) for v in range(V)], 1)
+
+        # FDI and heads (SPEC 3.4), (N, V, C) layout.
+        pv = sample(pixel, project(pts)).permute(1, 0, 2)
+        s = torch.relu(conv1d("fc_0", h))
+        app = torch.relu(conv1d("alpha_res_0", pv))
+        k0, u0 = conv1d("spatial_key_value_0.key_embed", app), conv1d("spatial_key_value_0.value_embed", app)
+        q1, r1 = conv1d("spatial_key_value_1.key_embed", s), conv1d("spatial_key_value_1.value_embed", s)
+        att = F.softmax(torch.einsum("njc,nvc->nvj", k0, q1) / math.sqrt(k0.shape[-1]), -1)
+        o_v = r1 + torch.einsum("nvj,njc->nvc", att, u0)
+        e = torch.relu(conv1d("fc_2", torch.relu(conv1d("fc_1", o_v))))
+        sigma = conv1d("alpha_fc", torch.relu(conv1d("fc_3", e.mean(1))))[:, 0]
+        c = conv1d("feature_fc", e) + conv1d("rgb_res_0", pv)
+        gam = torch.from_numpy(gamma(dirs.numpy()))[:, None].expand(-1, V, -1)
+        c = torch.relu(conv1d("view_fc", torch.cat([c, gam], -1))) + conv1d("rgb_res_1", pv)
+        rgb = conv1d("rgb_fc", torch.relu(conv1d("fc_4", c.mean(1))))
+        raw = torch.cat([rgb, sigma[:, None]], -1) * near_body[:, None]
+    raw = raw.view(len(o), S, 4).numpy()
+    out = cmd_composite({"raw": raw, "z": z.numpy(), "d": d.numpy()})
+    return {"rgb": out["rgb"], "acc": out["acc"], "depth": out["depth"], "sigma": raw[..., 3].copy(),
+            "kept": near_body.view(len(o), S).long().numpy()}
+
+
 if __name__ == "__main__":
     command, directory = sys.argv[1], sys.argv[2]
+    DIR = directory
     arrays = read_all(directory)
     write_all(directory, globals()["cmd_" + command](arrays))

@@ -1,17 +1,22 @@
 #pragma once
 // Helpers shared by the test executables: scratch folders and the Python used for fixtures.
 
+#include <unistd.h>
+
 #include <cstdlib>
 #include <filesystem>
 #include <string>
 
 namespace th::test {
 
-// A fresh, empty folder under the build tree's test_tmp (TH_TEST_TMP), unique per name.
+// A fresh, empty folder under the build tree's test_tmp (TH_TEST_TMP), unique per name and per
+// process: CTest runs test cases of one executable in parallel processes, which must not clear
+// each other's folders.
 inline std::filesystem::path scratch_dir(const std::string& name) {
   const char* root = std::getenv("TH_TEST_TMP");
   std::filesystem::path dir =
-      std::filesystem::path(root ? root : std::filesystem::temp_directory_path().string()) / name;
+      std::filesystem::path(root ? root : std::filesystem::temp_directory_path().string()) /
+      (name + "." + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;

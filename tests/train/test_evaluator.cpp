@@ -3,6 +3,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "data/dataset.hpp"
 #include "eval/evaluator.hpp"
 #include "train/trainer.hpp"
 #include "support/test_env.hpp"
@@ -52,4 +53,38 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
   size_t panels = 0;
   for (const auto& e : fs::directory_iterator(run / "eval_a" / "images")) panels += e.path().extension() == ".png";
   CHECK(panels == 3);
+
+  // per_image.csv's point counts against an independent count: every sample of every in-box
+  // ray (points), and those farther than render.cull_distance from all body vertices (culled).
+  const th::data::Dataset ds(c.data, "identity", th::data::Dataset::Mode::Test, th::data::load_body_model(c.data));
+  std::stringstream rows(csv_a);
+  std::string line;
+  std::getline(rows, line);
+  REQUIRE(line == "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points");
+  int checked = 0;
+  while (std::getline(rows, line)) {
+    std::vector<std::string> f;
+    std::stringstream cells(line);
+    for (std::string cell; std::getline(cells, cell, ',');) f.push_back(cell);
+    REQUIRE(f.size() == 9);
+    INFO(line);
+    for (size_t i = 0; i < ds.size(); ++i) {
+      const auto s = ds.load(i, 0);
+      if (s.human != f[0] || s.frame != std::stoi(f[1]) || s.target_view != std::stoi(f[2])) continue;
+      const int64_t S = c.render.samples;
+      const auto t = torch::linspace(0, 1, S, torch::kFloat64);
+      const auto near = s.near.to(torch::kFloat64).unsqueeze(1), far = s.far.to(torch::kFloat64).unsqueeze(1);
+      const auto z = near * (1 - t) + far * t;  // (R, S)
+      const auto pts = s.ray_o.to(torch::kFloat64).unsqueeze(1) + s.ray_d.to(torch::kFloat64).unsqueeze(1) * z.unsqueeze(2);
+      const auto d = std::get<0>(torch::cdist(pts.reshape({-1, 3}), s.body.vertices.to(torch::kFloat64)).min(1));
+      const int64_t points = s.ray_o.size(0) * S;
+      const int64_t culled = (d > c.render.cull_distance).sum().item<int64_t>();
+      const int64_t borderline = ((d - c.render.cull_distance).abs() < 1e-5).sum().item<int64_t>();
+      CHECK(std::stoll(f[7]) == points);
+      CHECK(std::abs(std::stoll(f[8]) - culled) <= borderline);
+      CHECK(culled < points);
+      ++checked;
+    }
+  }
+  CHECK(checked == 3);
 }

@@ -1,0 +1,67 @@
+#!/usr/bin/env bash
+# Exit codes and messages of the executables for user errors (README: one line, exit 2).
+# Usage: check_exit_codes.sh <build/apps dir> <tiny dataset dir>
+set -u
+apps=$1 data=$2
+failures=0
+# expect <code> <message fragment> <command...>: exit code, one line on stderr holding the fragment.
+expect() {
+  local code=$1 fragment=$2
+  shift 2
+  local err rc
+  err=$("$@" 2>&1 >/dev/null)
+  rc=$?
+  local lines
+  lines=$(printf '%s\n' "$err" | grep -c .)
+  if [[ $rc -ne $code || $lines -ne 1 || "$err" != *"$fragment"* ]]; then
+    echo "FAIL: $* -> exit $rc, $lines line(s): $err (expected exit $code, one line with '$fragment')"
+    failures=$((failures + 1))
+  else
+    echo "ok: $* -> exit $rc: $err"
+  fi
+}
+tiny=(data.root="$data" data.split_file="$data/split.yaml" model.grouping.cache_dir="$data/../kmeans_cache")
+expect 2 "transhuman-train: error:" "$apps/transhuman-train" --bogus-flag
+expect 2 "--max-steps" "$apps/transhuman-train" --max-steps
+expect 2 "transhuman-eval: error:" "$apps/transhuman-eval" --limit notanumber
+expect 2 "--threads" "$apps/transhuman-render" --threads 100000
+expect 2 "transhuman-mesh: error:" "$apps/transhuman-mesh" --no-such-option
+expect 2 "transhuman-synth: error:" "$apps/transhuman-synth"
+expect 2 "model.dparf.nkk" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1
+expect 2 "does not exist" "$apps/transhuman-train" --dry-run --config /nonexistent/config.yaml
+expect 2 "--checkpoint is required" "$apps/transhuman-eval" "${tiny[@]}"
+# Run folders are never silently overwritten (training and evaluation).
+scratch=$(mktemp -d)
+trap 'rm -rf "$scratch"' EXIT
+mkdir -p "$scratch/used" && echo old > "$scratch/used/results.md"
+expect 2 "already holds 1 entry (results.md)" "$apps/transhuman-eval" --checkpoint x.pt --out "$scratch/used" "${tiny[@]}"
+expect 2 "already holds" "$apps/transhuman-train" --dry-run --out "$scratch/used" "${tiny[@]}"
+"$apps/transhuman-train" --dry-run --out "$scratch/run" "${tiny[@]}" >/dev/null 2>&1
+expect 2 "model.dparf.nk (run: 7, now: 1)" "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" model.dparf.nk=1
+if "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" train.lr=1e-4 >/dev/null 2>&1; then
+  echo "ok: --resume with an unchanged model section"
+else
+  echo "FAIL: --resume with only a training key changed was refused"; failures=$((failures + 1))
+fi
+if "$apps/transhuman-train" --dry-run --force --out "$scratch/used" "${tiny[@]}" >/dev/null 2>&1 && [[ ! -e "$scratch/used/results.md" ]]; then
+  echo "ok: --force replaces the folder's contents"
+else
+  echo "FAIL: --force"; failures=$((failures + 1))
+fi
+# Values are checked, never replaced by a default.
+expect 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
+expect 2 "--width" "$apps/transhuman-render" --width -10
+expect 2 "--frame" "$apps/transhuman-mesh" --frame -1
+expect 2 "must be finite, not nan" "$apps/transhuman-mesh" --threshold nan
+expect 2 "--limit" "$apps/transhuman-eval" --limit -5
+expect 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
+: > "$scratch/empty.yaml"
+expect 2 "is empty" "$apps/transhuman-train" --dry-run --config "$scratch/empty.yaml"
+printf 'parent: %s\ntrain:\n  lr:\n' "$PWD/configs/default.yaml" > "$scratch/null.yaml"
+expect 2 "'train.lr' has no value" "$apps/transhuman-train" --dry-run --config "$scratch/null.yaml"
+printf 'parent: %s\nseed: 1\nseed: 2\n' "$PWD/configs/default.yaml" > "$scratch/twice.yaml"
+expect 2 "'seed' appears twice" "$apps/transhuman-train" --dry-run --config "$scratch/twice.yaml"
+expect 2 "is a folder" "$apps/transhuman-train" --dry-run --config "$scratch"
+if "$apps/transhuman-train" --help >/dev/null; then echo "ok: --help exits 0"; else echo "FAIL: --help"; failures=$((failures + 1)); fi
+echo "$failures failed"
+exit $((failures > 0))

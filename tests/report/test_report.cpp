@@ -1,0 +1,114 @@
+// The page writer without a browser: escaping, what index.html embeds, what the folder holds.
+#include <catch2/catch.hpp>
+
+#include <fstream>
+#include <sstream>
+
+#include "core/error.hpp"
+#include "report/report.hpp"
+#include "support/test_env.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string read_all(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+void write(const fs::path& p, const std::string& text) {
+  fs::create_directories(p.parent_path());
+  std::ofstream(p, std::ios::binary) << text;
+}
+
+// An evaluation folder as transhuman-eval leaves it, with two images and their panels.
+fs::path fake_eval(const fs::path& dir) {
+  write(dir / "summary.json",
+        "{\"setting\": \"identity\", \"images\": 2, \"psnr\": 21.5, \"ssim\": 0.7, \"lpips\": null, "
+        "\"lpips_available\": \"no\", \"seconds_per_image\": 0.5}\n");
+  write(dir / "per_image.csv",
+        "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n"
+        "CoreView_s03,0,3,20.000000,0.600000,n/a,0.5,10,1\nCoreView_s03,2,5,23.000000,0.800000,n/a,0.5,10,1\n");
+  write(dir / "config.yaml", "note: </script><b>\n");
+  write(dir / "images" / "CoreView_s03_f0000_v03.png", "png");
+  write(dir / "images" / "CoreView_s03_f0002_v05.png", "png");
+  return dir;
+}
+
+}  // namespace
+
+TEST_CASE("js_string escapes quotes, newlines and anything that could close the script element", "[report]") {
+  CHECK(th::report::js_string("a\"b\\c\nd") == "\"a\\\"b\\\\c\\nd\"");
+  CHECK(th::report::js_string("</script><!--") == "\"\\u003c/script\\u003e\\u003c!--\"");
+  CHECK(th::report::js_string(std::string("\x01", 1)) == "\"\\u0001\"");
+  CHECK(th::report::js_string("λ") == "\"λ\"");  // UTF-8 passes through
+}
+
+TEST_CASE("an evaluation page embeds the outputs and refers to the panels where they lie", "[report]") {
+  const fs::path eval = fake_eval(th::test::scratch_dir("report_eval") / "eval_identity");
+  th::report::PageSources sources;
+  sources.evals = {eval};
+  const fs::path page = th::report::write_page(sources, eval);
+  CHECK(page == eval / "index.html");
+  const std::string html = read_all(page);
+  CHECK_THAT(html, Catch::Contains("\\\"psnr\\\": 21.5"));  // summary.json, as text
+  CHECK_THAT(html, Catch::Contains("\"images/CoreView_s03_f0002_v05.png\""));
+  CHECK(html.find("</script><b>") == std::string::npos);  // the config cannot break out
+  CHECK(fs::exists(eval / "report.js"));
+  CHECK(fs::exists(eval / "report.css"));
+  CHECK_FALSE(fs::exists(eval / "mesh.js"));  // no mesh, no viewer
+}
+
+TEST_CASE("a demo page copies what it shows into its folder", "[report]") {
+  const fs::path root = th::test::scratch_dir("report_demo");
+  const fs::path eval = fake_eval(root / "run" / "eval_identity");
+  write(root / "run" / "orbit" / "frames" / "frame_0000.png", "png");
+  write(root / "run" / "orbit" / "video.mp4", "mp4");
+  write(root / "run" / "mesh" / "p.ply", "ply\nformat binary_little_endian 1.0\nend_header\n");
+  th::report::PageSources sources;
+  sources.evals = {eval};
+  sources.orbit = root / "run" / "orbit";
+  sources.mesh = root / "run" / "mesh" / "p.ply";
+  const fs::path out = root / "report";
+  th::report::write_page(sources, out);
+  CHECK(fs::exists(out / "eval_identity" / "images" / "CoreView_s03_f0000_v03.png"));
+  CHECK(fs::exists(out / "eval_identity" / "summary.json"));
+  CHECK(fs::exists(out / "orbit" / "frames" / "frame_0000.png"));
+  CHECK(fs::exists(out / "orbit" / "video.mp4"));
+  CHECK(fs::exists(out / "p.ply"));
+  // The mesh as base64 (a file:// page may not fetch it): "ply\nfor" encodes to "cGx5CmZvcm".
+  CHECK_THAT(read_all(out / "mesh.js"), Catch::Contains("\"cGx5CmZvcm"));
+  const std::string html = read_all(out / "index.html");
+  CHECK_THAT(html, Catch::Contains("\"eval_identity/images/CoreView_s03_f0000_v03.png\""));
+  CHECK(html.find(root.string()) == std::string::npos);  // nothing refers outside the folder
+  if (!th::report::find_three_js().empty()) {
+    CHECK(fs::exists(out / "three" / "three.min.js"));
+    CHECK_THAT(html, Catch::Contains("<script src=\"three/PLYLoader.js\"></script>"));
+  }
+}
+
+TEST_CASE("a missing summary.json is an error naming the file", "[report]") {
+  const fs::path dir = th::test::scratch_dir("report_missing");
+  th::report::PageSources sources;
+  sources.evals = {dir};
+  CHECK_THROWS_WITH(th::report::write_page(sources, dir), Catch::Contains((dir / "summary.json").string()));
+}
+
+TEST_CASE("an ablation page holds every row and links each row's own page", "[report]") {
+  const fs::path root = th::test::scratch_dir("report_ablation");
+  fake_eval(root / "full" / "eval_identity");
+  fake_eval(root / "fdi_wo_h" / "eval_identity");
+  write(root / "full" / "eval_identity" / "index.html", "<html></html>");
+  const fs::path page = th::report::write_ablation_page(
+      {{"full", "the paper's model", root / "full" / "eval_identity", 600},
+       {"fdi_wo_h", "without the human branch", root / "fdi_wo_h" / "eval_identity", NAN}},
+      "ablations", root);
+  const std::string html = read_all(page);
+  CHECK_THAT(html, Catch::Contains("name:\"full\""));
+  CHECK_THAT(html, Catch::Contains("name:\"fdi_wo_h\""));
+  CHECK_THAT(html, Catch::Contains("page:\"full/eval_identity/index.html\""));
+  CHECK_THAT(html, Catch::Contains("train_seconds:null"));
+}
