@@ -33,8 +33,7 @@ int main(int argc, char** argv) {
     page.evals = {ctx.run_dir};
     const auto metrics = std::filesystem::path(model.checkpoint).parent_path().parent_path() / "metrics.jsonl";
     if (std::filesystem::exists(metrics)) page.metrics = metrics;
-    std::cout << "report: " << th::report::write_page(page, ctx.run_dir).string() << "
-";
+    std::cout << "report: " << th::report::write_page(page, ctx.run_dir).string() << "\n";
     return 0;
   });
 }
