@@ -324,7 +324,7 @@
     svg.append(el('svg:line', { x1: 0, x2: W, y1: H / 2, y2: H / 2, class: 'grid' }));
     const bw = (W - 2 * M) / d.length;
     d.forEach((v, i) => {
-      const h = (Math.abs(v) / top) * (H / 2 - M);
+      const h = (Math.abs(v) / top) * (H / 2 - 14);  // room for the scale label
       svg.append(el('svg:rect', { x: M + i * bw, width: Math.max(bw - 0.5, 0.5), y: v > 0 ? H / 2 - h : H / 2, height: h,
         fill: v > 0 ? COLORS[2] : COLORS[1] }));
     });
