@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-eval", options.dry_run ? "" : "runs/eval");
-    th::app::print_summary(ctx);
+    th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     if (options.dry_run) return 0;
     const auto summary = th::eval::evaluate(ctx.config, ctx.device, model.checkpoint, ctx.run_dir);
     std::cout << th::eval::markdown_table({summary});

@@ -18,8 +18,8 @@ int main(int argc, char** argv) {
     cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first")
         ->check(th::app::at_least(0));
     cli.add_option("--voxel", request.voxel, "grid spacing in metres (SPEC 7: 0.005)")->check(th::app::above(0));
-    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density (SPEC 7: 20)")
-        ->check(th::app::finite_number());
+    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density, >= 0 (SPEC 7: 20)")
+        ->check(th::app::at_least(0));
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
     cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)")
         ->check(th::app::at_least(0));
@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-mesh", "runs/mesh");
-    th::app::print_summary(ctx);
+    th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     if (options.dry_run) return 0;
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     const auto s = th::inference::extract_mesh(session, request, ctx.run_dir);

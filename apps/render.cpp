@@ -40,7 +40,7 @@ int main(int argc, char** argv) {
     if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;
 
     const auto ctx = th::app::start_run(options, "transhuman-render", "runs/render");
-    th::app::print_summary(ctx);
+    th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     if (options.dry_run) return 0;
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     const auto s = th::inference::render_video(session, request, ctx.run_dir);

@@ -94,7 +94,7 @@ int main(int argc, char** argv) {
       const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
       th::runtime::set_threads(std::max(1, cores / ranks_here));
     }
-    if (lead) th::app::print_summary(ctx);
+    if (lead) th::app::print_summary(ctx, options.dry_run);
     if (options.dry_run) return 0;
 
     th::train::TrainOptions train_options{ctx.run_dir, resume, max_steps};

@@ -60,19 +60,6 @@ void add_force_option(CLI::App& cli, CommonOptions& o) {
   o.guard_out = true;
 }
 
-namespace {
-
-// "a.b.c" -> value text of every scalar leaf of a YAML tree.
-void leaves(const YAML::Node& node, const std::string& prefix, std::map<std::string, std::string>& out) {
-  if (node.IsMap()) {
-    for (const auto& kv : node) leaves(kv.second, prefix + "." + kv.first.as<std::string>(), out);
-  } else {
-    out[prefix] = YAML::Dump(node);
-  }
-}
-
-}  // namespace
-
 void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume) {
   std::error_code ec;
   if (!fs::exists(dir, ec) || fs::is_empty(dir, ec)) return;
@@ -80,9 +67,8 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
   if (resume) {
     const fs::path previous = dir / "config.yaml";
     if (!fs::exists(previous)) fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
-    std::map<std::string, std::string> before, now;
-    leaves(YAML::LoadFile(previous.string())["model"], "model", before);
-    leaves(resolved["model"], "model", now);
+    const auto before = config::leaves(YAML::LoadFile(previous.string())["model"], "model");
+    const auto now = config::leaves(resolved["model"], "model");
     std::string changed;
     for (const auto& [key, value] : now) {
       const auto it = before.find(key);

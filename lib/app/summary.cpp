@@ -3,25 +3,33 @@
 #include <spdlog/spdlog.h>
 
 #include "body/smpl.hpp"
+#include "core/error.hpp"
 #include "data/dataset.hpp"
 #include "model/transhuman.hpp"
+#include "train/trainer.hpp"
 
 namespace th::app {
 
-void print_summary(const RunContext& ctx) {
+void print_summary(const RunContext& ctx, bool dry_run, const std::string& checkpoint) {
   const Config& c = ctx.config;
   spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", c.data.dataset,
                c.data.root, c.data.split_file, c.data.train_setting, c.data.test_setting,
                c.data.ratio);
-  // The data index: splits and annots only (no images are read).
+  // The data index: splits and annots only (no images are read), unless this is a dry run.
   try {
     auto smpl = data::load_body_model(c.data);
     spdlog::info("body model: {} vertices, {} faces", smpl->num_vertices(), smpl->faces.size(0));
     for (const auto& setting : {c.data.train_setting, c.data.test_setting}) {
       data::Dataset ds(c.data, setting, data::Dataset::Mode::Test, smpl);
       spdlog::info("  '{}': {} samples from {} humans", setting, ds.size(), ds.humans().size());
+      if (!dry_run) continue;
+      if (ds.size() == 0) fail("setting '", setting, "' lists no samples");
+      const auto sample = ds.load(0, uint64_t(c.seed));
+      spdlog::info("  '{}': sample 0 loaded ({} x {} target, {} reference views)", setting,
+                   sample.target_image.size(1), sample.target_image.size(0), sample.ref_images.size(0));
     }
   } catch (const Error& e) {
+    if (dry_run) throw;
     spdlog::warn("data not available: {}", e.what());
   }
   const auto& m = c.model;
@@ -31,6 +39,10 @@ void print_summary(const RunContext& ctx) {
                m.transhe.enabled ? "on" : "off", m.transhe.position, m.dparf.nk,
                m.dparf.coordinate, m.fdi.appearance, m.fdi.human, m.fdi.raw_rgb);
   model::TransHuman net(m, c.render.cull_distance);
+  if (dry_run && !checkpoint.empty()) {
+    train::load_weights(*net, checkpoint, c.eval.model_mismatch == "warn");
+    spdlog::info("checkpoint {} read and checked", checkpoint);
+  }
   for (const auto& p : model::parameter_counts(*net))
     spdlog::info("  parameters {:<44} {:>11}", p.module, with_commas(p.count));
   spdlog::info("render: {} samples/ray | progressive {} | chunk {} points", c.render.samples,

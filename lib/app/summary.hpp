@@ -5,7 +5,10 @@
 
 namespace th::app {
 
-// Logs the data, model and training set-up of the run.
-void print_summary(const RunContext& ctx);
+// Logs the data, model and training set-up of the run. With `dry_run` it also proves that the
+// run could start: the first sample of each setting is loaded (images, masks, cameras, body)
+// and `checkpoint`, when named, is read into the model; any failure is the run's error (a
+// plain summary only warns that the data is not available).
+void print_summary(const RunContext& ctx, bool dry_run = false, const std::string& checkpoint = "");
 
 }  // namespace th::app

@@ -150,12 +150,17 @@ struct EvalConfig {
   std::string lpips_weights = "";
   int limit = 0;                 // 0: all images
   bool save_images = true;
+  // A checkpoint trained with other model.* values (its stored config, or its run's config.yaml):
+  // "error" names the keys and stops; "warn" names them and goes on (a deliberate ablation).
+  std::string model_mismatch = "error";
 };
 
 struct Config {
   int64_t seed = 42;
   std::string device = "auto";  // auto | cpu | cuda
   int threads = 0;              // 0: one per core
+  // Refuse work whose estimated peak memory (render, mesh) exceeds this; 0: 3/4 of physical memory.
+  double max_memory_gb = 0;
   DataConfig data;
   ModelConfig model;
   RenderConfig render;
@@ -278,11 +283,13 @@ template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("lpips_weights", c.lpips_weights);
   v("limit", c.limit);
   v("save_images", c.save_images);
+  v.choice("model_mismatch", c.model_mismatch, {"error", "warn"});
 }
 template <class V> void visit_fields(V& v, Config& c) {
   v("seed", c.seed);
   v.choice("device", c.device, {"auto", "cpu", "cuda"});
   v("threads", c.threads);
+  v("max_memory_gb", c.max_memory_gb);
   v("data", c.data);
   v("model", c.model);
   v("render", c.render);

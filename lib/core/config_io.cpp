@@ -192,3 +192,24 @@ bool scalar_to(const YAML::Node& node, std::string& out) {
 
 }  // namespace detail
 }  // namespace th::config
+
+namespace th::config {
+namespace {
+
+void collect_leaves(const YAML::Node& node, const std::string& prefix, std::map<std::string, std::string>& out) {
+  if (node.IsMap()) {
+    for (const auto& kv : node) collect_leaves(kv.second, detail::join_path(prefix, kv.first.as<std::string>()), out);
+  } else {
+    out[prefix] = YAML::Dump(node);
+  }
+}
+
+}  // namespace
+
+std::map<std::string, std::string> leaves(const YAML::Node& tree, const std::string& prefix) {
+  std::map<std::string, std::string> out;
+  collect_leaves(tree, prefix, out);
+  return out;
+}
+
+}  // namespace th::config

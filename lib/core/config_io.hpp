@@ -26,6 +26,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <initializer_list>
+#include <map>
 #include <set>
 #include <string>
 #include <type_traits>
@@ -191,5 +192,9 @@ T load(const std::filesystem::path& file, const std::vector<std::string>& overri
 
 // Writes the resolved config (all fields, defaults included) as YAML. Atomic.
 void write_yaml(const std::filesystem::path& file, const YAML::Node& tree);
+
+// Every leaf of a tree as "prefix.a.b" -> its YAML text (sequences are leaves); for comparing
+// two configs key by key.
+std::map<std::string, std::string> leaves(const YAML::Node& tree, const std::string& prefix);
 
 }  // namespace th::config

@@ -94,7 +94,11 @@ torch::Device select_device(const std::string& requested) {
 int set_threads(int threads) {
   // Debian's LibTorch starts with a single OpenMP thread when OMP_NUM_THREADS is unset, so
   // "default" means one thread per core here.
-  if (threads <= 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  // More threads than this only adds scheduling overhead; 100000 would hang thread creation.
+  if (threads > 8 * cores)
+    fail("threads=", threads, " is more than 8 per core (this machine has ", cores, "); at most ", 8 * cores);
+  if (threads <= 0) threads = cores;
   torch::set_num_threads(threads);
   return torch::get_num_threads();
 }

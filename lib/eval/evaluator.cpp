@@ -71,7 +71,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   const auto smpl = data::load_body_model(config.data);
   auto dataset = std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
   model::TransHuman model(config.model, config.render.cull_distance);
-  train::load_weights(*model, checkpoint);
+  train::load_weights(*model, checkpoint, config.eval.model_mismatch == "warn");
   model->to(device);
   model->eval();
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");

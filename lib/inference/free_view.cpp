@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/resources.hpp"
 #include "core/progress.hpp"
 #include "io/bytes.hpp"
 #include "video/contact_sheet.hpp"
@@ -132,6 +133,9 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     count = int(std::max(frames.size(), cameras.size()));
     for (int k = 0; k < count; ++k) shots.push_back(cameras[size_t(k) % cameras.size()]);
   }
+
+  // What it costs, refused before anything is written when it cannot fit.
+  resources::check(session.render_estimate(prepared, width, height, count), session.config().max_memory_gb);
 
   // Resume only what the same request wrote.
   fs::create_directories(out_dir);

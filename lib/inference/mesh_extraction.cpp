@@ -5,9 +5,11 @@
 #include <torch/torch.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 
 #include "core/error.hpp"
+#include "core/resources.hpp"
 #include "core/progress.hpp"
 #include "geometry/mesh.hpp"
 #include "mesh/marching_cubes.hpp"
@@ -18,8 +20,43 @@
 namespace th::inference {
 namespace fs = std::filesystem;
 
+namespace {
+
+constexpr int kPad = 10;  // zero cells around the grid (SPEC 7)
+
+resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest& request, const Session& session,
+                                  const PreparedFrame& prepared) {
+  double n[3], side[3];
+  for (int a = 0; a < 3; ++a) {
+    side[a] = (bounds[1][a] - bounds[0][a]).item<double>();
+    n[a] = std::ceil((side[a] + request.voxel) / request.voxel);
+  }
+  const double plane = (n[0] + 2 * kPad) * (n[1] + 2 * kPad), points = n[0] * n[1] * n[2];
+  const double slab = std::max(1.0, std::floor(double(request.slab_points) / (n[0] * n[1]))) * n[0] * n[1];
+  // Marching cubes keeps three padded slices and five edge-index maps; a slab of points is
+  // evaluated at once (float64 coordinates, density, culling indices); the mesh grows with the
+  // surface: about two vertices per voxel of the box's surface area, two faces per vertex.
+  const double area = 2 * (side[0] * side[1] + side[1] * side[2] + side[0] * side[2]);
+  const double verts = 2 * area / (request.voxel * request.voxel);
+  double cache = 0;
+  for (const auto& [name, t] : prepared.cache.tensors) cache += double(t.nbytes());
+  resources::Estimate e;
+  e.what = fmt::format("mesh grid {:.0f} x {:.0f} x {:.0f} at {} mm", n[0], n[1], n[2], request.voxel * 1000);
+  e.bytes = plane * 8 * 4 + slab * 48 + verts * (12 + 2 * 24) + cache +
+            double(session.config().render.chunk_points) * resources::kBytesPerChunkPoint;
+  e.samples = points;
+  e.threads = session.device().is_cpu() ? torch::get_num_threads() : 0;
+  return e;
+}
+
+}  // namespace
+
 MeshSummary extract_mesh(const Session& session, const MeshRequest& request, const fs::path& out_dir) {
-  if (!(request.voxel > 0)) fail("mesh voxel size must be positive, got ", request.voxel);
+  if (!(request.voxel > 0) || !std::isfinite(request.voxel))
+    fail("mesh voxel size must be a positive number, got ", request.voxel);
+  if (!(request.threshold >= 0) || !std::isfinite(request.threshold))
+    fail("mesh threshold must be a finite number >= 0, got ", request.threshold,
+         " (the grid away from the body and its padding hold density 0: a negative level puts all of it inside)");
   const int h = session.find_human(request.human);
   const auto& human = session.human(h);
   int frame = request.frame;
@@ -33,15 +70,18 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   const auto t0 = std::chrono::steady_clock::now();
   const PreparedFrame prepared = session.prepare(h, frame, request.view);
 
-  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7).
-  const auto grid = mesh::grid_over_bounds(prepared.sample.body.bounds.to(torch::kFloat64), request.voxel);
+  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7); what it
+  // costs is checked first (a too fine voxel is refused in a second, not after filling memory).
+  const auto bounds = prepared.sample.body.bounds.to(torch::kFloat64).reshape({2, 3});
+  resources::check(mesh_estimate(bounds, request, session, prepared), session.config().max_memory_gb);
+  const auto grid = mesh::grid_over_bounds(bounds, request.voxel);
   const int64_t plane = grid.height * grid.width;
   const int64_t slab = std::max<int64_t>(1, request.slab_points / std::max<int64_t>(1, plane));
   MeshSummary summary;
   summary.grid = {grid.width, grid.height, grid.depth};
   spdlog::info("mesh: {} frame {} | grid {} x {} x {} at {} mm | threshold {}", human.name(), frame,
                grid.width, grid.height, grid.depth, request.voxel * 1000, request.threshold);
-  mesh::MarchingCubes mc(grid.height, grid.width, grid.spec, {request.threshold, 10, 0.f});
+  mesh::MarchingCubes mc(grid.height, grid.width, grid.spec, {request.threshold, kPad, 0.f});
   Progress progress("density", grid.depth, "slice");
   std::vector<torch::Tensor> seen;  // a subsample of the evaluated densities, for the statistics
   for (int64_t z0 = 0; z0 < grid.depth; z0 += slab) {

@@ -1,5 +1,6 @@
 #include "inference/session.hpp"
 
+#include <fmt/format.h>
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -20,7 +21,7 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   canonical_ = smpl->v_template;  // float64: token positions [parity]
   tokens_ = std::make_unique<train::Tokens>(config.model.grouping, smpl->v_template);
   model_ = model::TransHuman(config.model, config.render.cull_distance);
-  train::load_weights(*model_, checkpoint);
+  train::load_weights(*model_, checkpoint, config.eval.model_mismatch == "warn");
   model_->to(device);
   model_->eval();
 }
@@ -87,19 +88,44 @@ video::PathCamera Session::dataset_camera(const PreparedFrame& frame, int view) 
 }
 
 torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
-                              int height) const {
+                              int height, int64_t band_pixels) const {
   torch::NoGradGuard no_grad;
-  const auto pixels = data::pixel_grid(width, height);
-  const auto rays = data::pixel_rays(pixels, camera.K, camera.R, camera.T);
-  const auto nf = data::near_far(rays.origins, rays.dirs, frame.sample.body.bounds.to(torch::kFloat64));
-  const auto valid = nf.valid;
-  auto f = [&](const torch::Tensor& t) { return t.index({valid}).to(device_, torch::kFloat32); };
-  const render::Rays r{f(rays.origins), f(rays.dirs), f(nf.near), f(nf.far)};
-  const auto vp = pixels.index({valid});
-  const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
-  if (r.size() == 0) return torch::zeros({height, width, 3}, torch::kFloat32);
-  const auto result = model::render_rays(*model_, frame.cache, r, config_.render);
-  return train::scatter_image(result.rgb.to(torch::kCPU, torch::kFloat32), flat, height, width);
+  auto image = torch::zeros({int64_t(height) * width, 3}, torch::kFloat32);
+  const auto bounds = frame.sample.body.bounds.to(torch::kFloat64);
+  // A band of rows at a time: the rays' memory is bounded by the band, not by the image (a
+  // 512x512 view is one band).
+  const int64_t rows = std::max<int64_t>(1, band_pixels / width);
+  for (int64_t y0 = 0; y0 < height; y0 += rows) {
+    const int64_t y1 = std::min<int64_t>(height, y0 + rows);
+    auto pixels = data::pixel_grid(width, int(y1 - y0));
+    pixels.select(1, 1).add_(y0);
+    const auto rays = data::pixel_rays(pixels, camera.K, camera.R, camera.T);
+    const auto nf = data::near_far(rays.origins, rays.dirs, bounds);
+    const auto valid = nf.valid;
+    auto f = [&](const torch::Tensor& t) { return t.index({valid}).to(device_, torch::kFloat32); };
+    const render::Rays r{f(rays.origins), f(rays.dirs), f(nf.near), f(nf.far)};
+    if (r.size() == 0) continue;
+    const auto vp = pixels.index({valid});
+    const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
+    const auto result = model::render_rays(*model_, frame.cache, r, config_.render);
+    image.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
+  }
+  return image.view({height, width, 3});
+}
+
+resources::Estimate Session::render_estimate(const PreparedFrame& frame, int width, int height, int frames) const {
+  const double pixels = double(width) * height;
+  double cache = 0;
+  for (const auto& [name, t] : frame.cache.tensors) cache += double(t.nbytes());
+  resources::Estimate e;
+  e.what = fmt::format("render {} x {}{}", width, height, frames > 1 ? fmt::format(" x {} frames", frames) : "");
+  // The image (float RGB, its 8-bit copies for the PNG), one band of rays (float64 origins and
+  // directions, near/far, pixel indices and their float32 copies), one chunk of the network.
+  e.bytes = pixels * (12 + 6) + std::min(pixels, double(kRenderBandPixels)) * 200 + cache +
+            double(config_.render.chunk_points) * resources::kBytesPerChunkPoint;
+  e.samples = pixels * config_.render.samples * frames;
+  e.threads = device_.is_cpu() ? torch::get_num_threads() : 0;
+  return e;
 }
 
 torch::Tensor Session::density(const PreparedFrame& frame, const torch::Tensor& pts) const {

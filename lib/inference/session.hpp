@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/config.hpp"
+#include "core/resources.hpp"
 #include "data/dataset.hpp"
 #include "model/frame_cache.hpp"
 #include "model/inputs.hpp"
@@ -60,8 +61,12 @@ class Session {
   // Renders `camera` at width x height as evaluation does (progressive rendering, culling,
   // chunks of render.chunk_points, no autograd): (H, W, 3) float32 CPU RGB in [0, 1], black
   // where no ray meets the frame's box.
-  torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
-                       int height) const;
+  // Rays are made and rendered `band_pixels` pixels (whole rows) at a time.
+  static constexpr int64_t kRenderBandPixels = int64_t{1} << 18;
+  torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width, int height,
+                       int64_t band_pixels = kRenderBandPixels) const;
+  // Peak memory and samples of rendering `frames` frames like `frame` at width x height.
+  resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height, int frames) const;
 
   // Raw density sigma_raw of world points (N, 3): 0 for points farther than
   // render.cull_distance from the body (SPEC 7), the network elsewhere, in chunks of
@@ -75,6 +80,7 @@ class Session {
   std::string checkpoint_id() const;
 
   const Config& config() const { return config_; }
+  const torch::Device& device() const { return device_; }
   const data::Dataset& dataset() const { return *dataset_; }
 
  private:

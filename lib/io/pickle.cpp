@@ -359,6 +359,7 @@ enum class Global {
   Csr,     // scipy.sparse csr_matrix / csr_array
   Chumpy,  // chumpy.ch.Ch
   Extension,  // a global of PickleExtensions::globals
+  PlainClass,  // a class under PickleExtensions::class_prefixes: NEWOBJ + BUILD(dict)
 };
 
 std::optional<Global> lookup_global(std::string_view module_in, std::string_view name) {
@@ -398,7 +399,7 @@ std::optional<Global> lookup_global(std::string_view module_in, std::string_view
 }
 
 bool is_instance_class(Global g) {
-  return g == Global::Csc || g == Global::Csr || g == Global::Chumpy;
+  return g == Global::Csc || g == Global::Csr || g == Global::Chumpy || g == Global::PlainClass;
 }
 
 // One Python object while unpickling. Objects reference each other by pointer (the memo shares
@@ -733,6 +734,8 @@ class Converter {
   }
 
   Value instance(Node* n, int depth) {
+    if (static_cast<Global>(n->i) == Global::PlainClass)
+      return Value::object(n->name, n->state ? convert(n->state, depth + 1) : Value());
     if (n->tensor.defined()) return Value::array(n->tensor);  // shared: densified once
     if (static_cast<Global>(n->i) == Global::Chumpy) {
       n->tensor = field_tensor(n, "x", depth);
@@ -941,6 +944,10 @@ class Unpickler {
     const std::string dotted = std::string(module) + "." + std::string(name);
     auto g = lookup_global(module, name);
     if (!g && ext_ && ext_->globals.count(dotted)) g = Global::Extension;
+    if (!g && ext_) {
+      for (const auto& prefix : ext_->class_prefixes)
+        if (dotted.compare(0, prefix.size(), prefix) == 0) g = Global::PlainClass;
+    }
     if (!g) {
       error("refused global '", dotted,
             "': only numpy arrays, numpy scalars, scipy.sparse matrices, ",

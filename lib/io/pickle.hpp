@@ -114,6 +114,10 @@ struct PickleExtensions {
   std::map<std::string, std::function<Value(const Value::List& args)>> globals;
   // BINPERSID: the converted persistent id -> the object it stands for. Empty: refused.
   std::function<Value(const Value& pid)> persistent_load;
+  // Globals whose dotted name starts with one of these are plain classes: NEWOBJ makes an
+  // instance, BUILD gives it a dict of attributes, and it converts to Value::object(name,
+  // attributes). For TorchScript archives ("__torch__."); nothing of the class is executed.
+  std::vector<std::string> class_prefixes;
   // Accept BUILD on a dict (attributes of a dict subclass, such as a state dict's _metadata)
   // and drop that state.
   bool ignore_dict_state = false;

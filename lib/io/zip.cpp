@@ -3,6 +3,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <limits>
 
 #include "core/error.hpp"
@@ -18,26 +19,29 @@ constexpr uint32_t kEnd64Sig = 0x06064b50;
 constexpr uint32_t kEnd64LocatorSig = 0x07064b50;
 constexpr uint64_t kMaxDeflateRatio = 1032;  // deflate cannot expand data more than this
 
+// Bounds-checked reads from an archive (memory or file), naming the archive in errors.
 class Cursor {
  public:
-  Cursor(std::string_view data, const std::string& name) : data_(data), name_(name) {}
-  uint64_t at(size_t offset, int n, const char* what) const {
-    if (offset > data_.size() || static_cast<size_t>(n) > data_.size() - offset) {
-      th::fail(name_, ": truncated zip archive: ", what, " at byte ", offset,
-               " runs past the end (", data_.size(), " bytes)");
-    }
-    return load_le(data_.data() + offset, n);
-  }
-  std::string_view slice(uint64_t offset, uint64_t n, const char* what) const {
-    if (offset > data_.size() || n > data_.size() - offset) {
+  Cursor(const ZipSource& source, const std::string& name) : source_(source), name_(name) {}
+  uint64_t size() const { return source_.size(); }
+  void check(uint64_t offset, uint64_t n, const char* what) const {
+    if (offset > size() || n > size() - offset) {
       th::fail(name_, ": truncated zip archive: ", what, " at byte ", offset, " (", n,
-               " bytes) runs past the end (", data_.size(), " bytes)");
+               " bytes) runs past the end (", size(), " bytes)");
     }
-    return data_.substr(static_cast<size_t>(offset), static_cast<size_t>(n));
+  }
+  uint64_t at(uint64_t offset, int n, const char* what) const {
+    check(offset, static_cast<uint64_t>(n), what);
+    const std::string bytes = source_.read(offset, static_cast<uint64_t>(n));
+    return load_le(bytes.data(), n);
+  }
+  std::string slice(uint64_t offset, uint64_t n, const char* what) const {
+    check(offset, n, what);
+    return source_.read(offset, n);
   }
 
  private:
-  std::string_view data_;
+  const ZipSource& source_;
   const std::string& name_;
 };
 
@@ -75,66 +79,90 @@ std::string inflate_raw(std::string_view in, uint64_t size, const std::string& w
 
 }  // namespace
 
-std::vector<ZipMember> read_zip(std::string_view archive, const std::string& name) {
-  const Cursor c(archive, name);
-  if (archive.size() < 22) th::fail(name, ": not a zip archive (", archive.size(), " bytes)");
+std::string MemorySource::read(uint64_t offset, uint64_t n) const {
+  return std::string(bytes_.substr(static_cast<size_t>(offset), static_cast<size_t>(n)));
+}
+
+FileSource::FileSource(const std::filesystem::path& path) : path_(path), in_(path, std::ios::binary) {
+  std::error_code ec;
+  size_ = std::filesystem::file_size(path, ec);
+  if (!in_ || ec) th::fail("cannot open '", path.string(), "'", ec ? ": " + ec.message() : std::string());
+}
+
+std::string FileSource::read(uint64_t offset, uint64_t n) const {
+  std::string out(static_cast<size_t>(n), '\0');
+  in_.clear();
+  in_.seekg(static_cast<std::streamoff>(offset));
+  in_.read(out.data(), static_cast<std::streamsize>(n));
+  if (static_cast<uint64_t>(in_.gcount()) != n)
+    th::fail("cannot read ", n, " bytes at byte ", offset, " of '", path_.string(), "'");
+  return out;
+}
+
+std::vector<ZipEntry> list_zip(const ZipSource& source, const std::string& name) {
+  const Cursor c(source, name);
+  const uint64_t total = source.size();
+  if (total < 22) th::fail(name, ": not a zip archive (", total, " bytes)");
   // End of central directory: the last signature within the comment's reach.
-  size_t end = std::string_view::npos;
-  const size_t lowest = archive.size() > 22 + 65535 ? archive.size() - 22 - 65535 : 0;
-  for (size_t p = archive.size() - 22 + 1; p-- > lowest;) {
-    if (load_le(archive.data() + p, 4) == kEndSig) {
-      end = p;
+  const uint64_t lowest = total > 22 + 65535 ? total - 22 - 65535 : 0;
+  const std::string tail = c.slice(lowest, total - lowest, "end of archive");
+  uint64_t end = UINT64_MAX;
+  for (size_t p = tail.size() - 22 + 1; p-- > 0;) {
+    if (load_le(tail.data() + p, 4) == kEndSig) {
+      end = lowest + p;
       break;
     }
   }
-  if (end == std::string_view::npos)
-    th::fail(name, ": not a zip archive (no end of central directory)");
+  if (end == UINT64_MAX) th::fail(name, ": not a zip archive (no end of central directory)");
   uint64_t entries = c.at(end + 10, 2, "end record");
   uint64_t cd_size = c.at(end + 12, 4, "end record");
   uint64_t cd_offset = c.at(end + 16, 4, "end record");
   if (entries == 0xffff || cd_size == 0xffffffff || cd_offset == 0xffffffff) {
     if (end < 20 || c.at(end - 20, 4, "zip64 locator") != kEnd64LocatorSig) {
-      th::fail(name, ": zip64 archive without a zip64 locator at byte ",
-               end - std::min<size_t>(end, 20));
+      th::fail(name, ": zip64 archive without a zip64 locator at byte ", end - std::min<uint64_t>(end, 20));
     }
     const uint64_t rec = c.at(end - 20 + 8, 8, "zip64 locator");
-    if (c.at(rec, 4, "zip64 end record") != kEnd64Sig)
-      th::fail(name, ": bad zip64 end record at byte ", rec);
+    if (c.at(rec, 4, "zip64 end record") != kEnd64Sig) th::fail(name, ": bad zip64 end record at byte ", rec);
     entries = c.at(rec + 32, 8, "zip64 end record");
     cd_size = c.at(rec + 40, 8, "zip64 end record");
     cd_offset = c.at(rec + 48, 8, "zip64 end record");
   }
-  c.slice(cd_offset, cd_size, "central directory");
   if (entries > cd_size / 46)
     th::fail(name, ": central directory at byte ", cd_offset, " cannot hold ", entries, " entries");
+  // The central directory in memory (it lies inside the archive, so no larger than it).
+  const std::string cd_bytes = c.slice(cd_offset, cd_size, "central directory");
+  const MemorySource cd_source(cd_bytes);
+  const std::string cd_name = name + " (central directory at byte " + std::to_string(cd_offset) + ")";
+  const Cursor cd(cd_source, cd_name);
 
-  std::vector<ZipMember> members;
-  uint64_t p = cd_offset;
+  std::vector<ZipEntry> out;
+  uint64_t p = 0;
   for (uint64_t e = 0; e < entries; ++e) {
-    if (c.at(p, 4, "central directory entry") != kCentralSig) {
-      th::fail(name, ": bad central directory entry at byte ", p);
+    if (cd.at(p, 4, "central directory entry") != kCentralSig) {
+      th::fail(name, ": bad central directory entry at byte ", cd_offset + p);
     }
-    const uint64_t flags = c.at(p + 8, 2, "central directory entry");
-    const uint64_t method = c.at(p + 10, 2, "central directory entry");
-    const uint64_t crc = c.at(p + 16, 4, "central directory entry");
-    uint64_t csize = c.at(p + 20, 4, "central directory entry");
-    uint64_t usize = c.at(p + 24, 4, "central directory entry");
-    const uint64_t name_len = c.at(p + 28, 2, "central directory entry");
-    const uint64_t extra_len = c.at(p + 30, 2, "central directory entry");
-    const uint64_t comment_len = c.at(p + 32, 2, "central directory entry");
-    uint64_t local = c.at(p + 42, 4, "central directory entry");
-    const std::string member(c.slice(p + 46, name_len, "member name"));
-    const std::string where = name + "/" + member;
-    const std::string_view extra = c.slice(p + 46 + name_len, extra_len, "extra field");
+    const uint64_t flags = cd.at(p + 8, 2, "central directory entry");
+    ZipEntry m;
+    m.method = cd.at(p + 10, 2, "central directory entry");
+    m.crc = cd.at(p + 16, 4, "central directory entry");
+    m.compressed_size = cd.at(p + 20, 4, "central directory entry");
+    m.size = cd.at(p + 24, 4, "central directory entry");
+    const uint64_t name_len = cd.at(p + 28, 2, "central directory entry");
+    const uint64_t extra_len = cd.at(p + 30, 2, "central directory entry");
+    const uint64_t comment_len = cd.at(p + 32, 2, "central directory entry");
+    uint64_t local = cd.at(p + 42, 4, "central directory entry");
+    m.name = cd.slice(p + 46, name_len, "member name");
+    const std::string where = name + "/" + m.name;
+    const std::string extra = cd.slice(p + 46 + name_len, extra_len, "extra field");
     // zip64 extra field: the 64-bit values of the fields that are 0xffffffff, in order.
     for (size_t x = 0; x + 4 <= extra.size();) {
       const uint64_t id = load_le(extra.data() + x, 2), len = load_le(extra.data() + x + 2, 2);
       if (x + 4 + len > extra.size()) break;
       if (id == 1) {
         size_t f = x + 4;
-        for (uint64_t* field : {&usize, &csize, &local}) {
+        for (uint64_t* field : {&m.size, &m.compressed_size, &local}) {
           if (*field != 0xffffffff) continue;
-          if (f + 8 > x + 4 + len) th::fail(where, ": short zip64 extra field at byte ", p);
+          if (f + 8 > x + 4 + len) th::fail(where, ": short zip64 extra field at byte ", cd_offset + p);
           *field = load_le(extra.data() + f, 8);
           f += 8;
         }
@@ -142,30 +170,35 @@ std::vector<ZipMember> read_zip(std::string_view archive, const std::string& nam
       x += 4 + len;
     }
     if (flags & 1) th::fail(where, ": encrypted zip members are not supported");
-    if (c.at(local, 4, "local header") != kLocalSig)
-      th::fail(where, ": bad local header at byte ", local);
+    if (m.method != 0 && m.method != 8)
+      th::fail(where, ": unsupported zip compression method ", m.method, " (only stored and deflate)");
+    if (m.method == 0 && m.compressed_size != m.size)
+      th::fail(where, ": stored member with different sizes (", m.compressed_size, " vs ", m.size, ")");
+    if (c.at(local, 4, "local header") != kLocalSig) th::fail(where, ": bad local header at byte ", local);
     const uint64_t local_name = c.at(local + 26, 2, "local header");
     const uint64_t local_extra = c.at(local + 28, 2, "local header");
-    const std::string_view raw =
-        c.slice(local + 30 + local_name + local_extra, csize, "member data");
-    ZipMember m;
-    m.name = member;
-    if (method == 0) {
-      if (csize != usize)
-        th::fail(where, ": stored member with different sizes (", csize, " vs ", usize, ")");
-      m.data = std::string(raw);
-    } else if (method == 8) {
-      m.data = inflate_raw(raw, usize, where);
-    } else {
-      th::fail(where, ": unsupported zip compression method ", method,
-               " (only stored and deflate)");
-    }
-    const uLong actual =
-        crc32_z(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(m.data.data()), m.data.size());
-    if (actual != crc) th::fail(where, ": CRC mismatch (corrupt archive)");
-    members.push_back(std::move(m));
+    m.data_offset = local + 30 + local_name + local_extra;
+    c.check(m.data_offset, m.compressed_size, "member data");
+    out.push_back(std::move(m));
     p += 46 + name_len + extra_len + comment_len;
   }
+  return out;
+}
+
+std::string read_member(const ZipSource& source, const ZipEntry& entry, const std::string& name) {
+  const std::string where = name + "/" + entry.name;
+  const Cursor c(source, name);
+  std::string raw = c.slice(entry.data_offset, entry.compressed_size, "member data");
+  std::string data = entry.method == 0 ? std::move(raw) : inflate_raw(raw, entry.size, where);
+  const uLong actual = crc32_z(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(data.data()), data.size());
+  if (actual != entry.crc) th::fail(where, ": CRC mismatch (corrupt archive)");
+  return data;
+}
+
+std::vector<ZipMember> read_zip(std::string_view archive, const std::string& name) {
+  const MemorySource source(archive);
+  std::vector<ZipMember> members;
+  for (const auto& e : list_zip(source, name)) members.push_back({e.name, read_member(source, e, name)});
   return members;
 }
 

@@ -11,26 +11,13 @@
 #include "io/bytes.hpp"
 #include "io/npy.hpp"
 #include "io/pickle.hpp"
+#include "model/checked_load.hpp"
 #include "model/transhuman.hpp"
 
 namespace th::model {
 namespace {
 
 using io::Value;
-
-torch::ScalarType storage_dtype(const std::string& cls, const std::string& source) {
-  static const std::unordered_map<std::string, torch::ScalarType> types = {
-      {"torch.FloatStorage", torch::kFloat},   {"torch.DoubleStorage", torch::kDouble},
-      {"torch.HalfStorage", torch::kHalf},     {"torch.BFloat16Storage", torch::kBFloat16},
-      {"torch.LongStorage", torch::kLong},     {"torch.IntStorage", torch::kInt},
-      {"torch.ShortStorage", torch::kShort},   {"torch.CharStorage", torch::kChar},
-      {"torch.ByteStorage", torch::kByte},     {"torch.BoolStorage", torch::kBool},
-      {"torch.UntypedStorage", torch::kByte},  // a bare storage (2.x); numel counts bytes
-  };
-  const auto it = types.find(cls);
-  if (it == types.end()) fail(source, ": unsupported storage type '", cls, "'");
-  return it->second;
-}
 
 void flatten(const Value& v, const std::string& prefix, std::map<std::string, torch::Tensor>& out) {
   const auto kind = v.kind();
@@ -65,7 +52,7 @@ const std::vector<std::pair<std::string, std::string>>& renames() {
 std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
                                                           const std::string& entry) {
   const std::string source = path.string();
-  if (!std::filesystem::exists(path)) fail("checkpoint '", source, "' does not exist");
+  check_checkpoint_archive(path);  // stored records inside the file: no allocation beyond its size
   std::unique_ptr<caffe2::serialize::PyTorchStreamReader> reader;
   try {
     reader = std::make_unique<caffe2::serialize::PyTorchStreamReader>(source);
@@ -93,7 +80,7 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
     // ('storage', storage type, key, location, numel)
     const auto& t = pid.as_list();
     if (t.size() < 5 || t[0].as_str() != "storage") fail(source, ": unexpected persistent id ", pid.type_name());
-    const auto dtype = storage_dtype(t[1].as_object().cls, source);
+    const auto dtype = storage_type(t[1].as_object().cls, source);
     const std::string key = t[2].as_str();
     const int64_t numel = t[4].as_int();
     auto it = storages.find(key);
@@ -102,8 +89,9 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
       if (!reader->hasRecord(record)) fail(source, ": missing storage record '", record, "'");
       const auto [data, size] = reader->getRecord(record);
       const int64_t itemsize = static_cast<int64_t>(c10::elementSize(dtype));
-      if (static_cast<int64_t>(size) != numel * itemsize)
-        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel * itemsize);
+      if (numel < 0 || size % static_cast<size_t>(itemsize) != 0 ||
+          static_cast<int64_t>(size / static_cast<size_t>(itemsize)) != numel)
+        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel, " elements of ", itemsize, " bytes");
       auto tensor = torch::empty({numel}, dtype);
       std::memcpy(tensor.data_ptr(), data.get(), size);
       if (swap_bytes && itemsize > 1) {
@@ -123,11 +111,9 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
     std::vector<int64_t> size, stride;
     for (const auto& s : a[2].as_list()) size.push_back(s.as_int());
     for (const auto& s : a[3].as_list()) stride.push_back(s.as_int());
-    int64_t last = offset;
-    for (size_t d = 0; d < size.size(); ++d) last += (size[d] - 1) * stride[d];
-    if (offset < 0 || (!size.empty() && last >= storage.numel() && storage.numel() > 0))
-      fail(source, ": tensor view of ", c10::IntArrayRef(size), " at offset ", offset,
-           " exceeds its storage of ", storage.numel(), " elements");
+    if (size.size() != stride.size())
+      fail(source, ": a tensor with ", size.size(), " sizes and ", stride.size(), " strides");
+    check_view(size, stride, offset, storage.numel(), source + ": a tensor");
     return Value::array(storage.as_strided(size, stride, offset).clone());
   };
   ext.globals["torch._utils._rebuild_tensor_v2"] = rebuild;
@@ -179,9 +165,11 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
       fail(source, ": missing key '", ref, "' (for ", name, ")");
     }
     auto src = it->second;
+    check_finite(src, source + ": tensor '" + ref + "'");
     if (src.dim() == 3 && src.size(2) == 1 && dst.dim() == 2) src = src.squeeze(2);  // Conv1d k=1
     if (src.sizes() != dst.sizes())
-      fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ", dst.sizes());
+      fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ", dst.sizes(),
+           config_keys_for(name).shape.empty() ? "" : " (decided by " + config_keys_for(name).shape + ")");
     copies.emplace_back(dst, src);
     used.insert(ref);
     report.loaded.push_back(ref);
@@ -205,6 +193,7 @@ void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& 
 
 void save_model_weights(const TransHumanImpl& model, const std::filesystem::path& path) {
   torch::serialize::OutputArchive archive;
+  write_model_config(archive, model.config());
   for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
   for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
   std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
@@ -214,6 +203,7 @@ void save_model_weights(const TransHumanImpl& model, const std::filesystem::path
 
 void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path) {
   if (!std::filesystem::exists(path)) fail("model weights '", path.string(), "' do not exist");
+  check_checkpoint_archive(path);
   torch::serialize::InputArchive archive;
   try {
     archive.load_from(path.string());
@@ -221,15 +211,18 @@ void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path
     fail(path.string(), ": cannot read model weights (", e.what_without_backtrace(), ")");
   }
   torch::NoGradGuard no_grad;
+  std::vector<std::pair<torch::Tensor, torch::Tensor>> copies;  // all checked before any is copied
   auto read = [&](const std::string& name, torch::Tensor& dst, bool buffer) {
     torch::Tensor t;
     if (!archive.try_read(name, t, buffer)) fail(path.string(), ": missing tensor '", name, "'");
+    check_loaded_tensor(t, path.string(), name);
     if (t.sizes() != dst.sizes())
       fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ", dst.sizes());
-    dst.copy_(t);
+    copies.emplace_back(dst, t);
   };
   for (auto& p : model.named_parameters()) read(p.key(), p.value(), false);
   for (auto& b : model.named_buffers()) read(b.key(), b.value(), true);
+  for (auto& [dst, src] : copies) dst.copy_(src);
 }
 
 }  // namespace th::model

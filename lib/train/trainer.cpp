@@ -21,6 +21,7 @@
 #include "io/bytes.hpp"
 #include "metrics/lpips.hpp"
 #include "metrics/metrics.hpp"
+#include "model/checked_load.hpp"
 #include "model/checkpoint_import.hpp"
 #include "model/encoder.hpp"
 #include "train/images.hpp"
@@ -42,6 +43,7 @@ void write_checkpoint(torch::serialize::OutputArchive& root, model::TransHumanIm
   model.save(m);
   optim.save(o);
   root.write("model", m);
+  model::write_model_config(root, model.config());
   root.write("optimizer", o);
   root.write("epoch", torch::tensor(int64_t(st.epoch)));
   root.write("step", torch::tensor(st.step));
@@ -49,11 +51,11 @@ void write_checkpoint(torch::serialize::OutputArchive& root, model::TransHumanIm
 }
 
 CheckpointState read_checkpoint(torch::serialize::InputArchive& root, model::TransHumanImpl& model,
-                                torch::optim::Adam& optim) {
+                                torch::optim::Adam& optim, const std::string& source) {
   torch::serialize::InputArchive m, o;
   root.read("model", m);
   root.read("optimizer", o);
-  model.load(m);
+  model::load_module_checked(model, m, source);
   optim.load(o);
   torch::Tensor epoch, step, iteration;
   root.read("epoch", epoch);
@@ -83,10 +85,11 @@ void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::
 CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,
                                 torch::optim::Adam& optim) {
   if (!fs::exists(path)) fail("cannot resume: '", path.string(), "' does not exist");
+  model::check_checkpoint_archive(path);
   torch::serialize::InputArchive root;
   try {
     root.load_from(path.string());
-    return read_checkpoint(root, model, optim);
+    return read_checkpoint(root, model, optim, path.string());
   } catch (const c10::Error& e) {
     fail("checkpoint '", path.string(), "' cannot be read: ", e.what_without_backtrace());
   }
@@ -108,7 +111,7 @@ CheckpointState broadcast_state(dist::Communicator& comm, model::TransHumanImpl&
   if (comm.rank() == 0) return st;
   torch::serialize::InputArchive root;
   root.load_from(bytes.data(), bytes.size());
-  return read_checkpoint(root, model, optim);
+  return read_checkpoint(root, model, optim, "rank 0's weights");
 }
 
 // BatchNorm running statistics: averaged over the ranks after each step so every rank holds the
@@ -130,7 +133,7 @@ void set_lr(torch::optim::Adam& optim, double lr) {
 
 }  // namespace
 
-void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint) {
+void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint, bool allow_model_mismatch) {
   if (!fs::exists(checkpoint)) fail("checkpoint '", checkpoint.string(), "' does not exist");
   if (checkpoint.extension() == ".pth") {
     const auto report = model::import_reference_checkpoint(model, checkpoint);
@@ -138,6 +141,7 @@ void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint) {
                  checkpoint.string());
     return;
   }
+  model::check_checkpoint_archive(checkpoint);
   torch::serialize::InputArchive root, m;
   try {
     root.load_from(checkpoint.string());
@@ -145,7 +149,18 @@ void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint) {
   } catch (const c10::Error& e) {
     fail("checkpoint '", checkpoint.string(), "' cannot be read: ", e.what_without_backtrace());
   }
-  model.load(m);
+  // Another model configuration: different shapes fail below naming the parameter; different
+  // values of shape-neutral keys (nk, num_tokens, ...) would silently compute something else.
+  const auto changed = model::model_config_differences(root, checkpoint, model.config());
+  if (!changed.empty()) {
+    std::string list;
+    for (const auto& c : changed) list += (list.empty() ? "" : "; ") + c;
+    if (!allow_model_mismatch)
+      fail("checkpoint '", checkpoint.string(), "' was trained with other model settings (", list,
+           "): use the run's config.yaml as --config, or eval.model_mismatch=warn to go on anyway");
+    spdlog::warn("checkpoint {} was trained with other model settings: {}", checkpoint.string(), list);
+  }
+  model::load_module_checked(model, m, checkpoint.string());
 }
 
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options) {

@@ -46,8 +46,11 @@ struct TrainSummary {
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options);
 
 // Loads the weights of a checkpoint into `model`: ours (.pt, written by train) or the reference
-// implementation's (.pth, SPEC 8). Throws th::Error naming the file.
-void load_weights(model::TransHumanImpl& model, const std::filesystem::path& checkpoint);
+// implementation's (.pth, SPEC 8). Every tensor is checked (model/checked_load.hpp); a checkpoint
+// trained with other model.* values is refused naming them, or with `allow_model_mismatch`
+// (eval.model_mismatch: warn) loaded with a warning. Throws th::Error naming the file.
+void load_weights(model::TransHumanImpl& model, const std::filesystem::path& checkpoint,
+                  bool allow_model_mismatch = false);
 
 // Our checkpoint: model weights, optimiser state and the position of the run.
 struct CheckpointState {

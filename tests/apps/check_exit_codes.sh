@@ -52,7 +52,7 @@ fi
 expect 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
 expect 2 "--width" "$apps/transhuman-render" --width -10
 expect 2 "--frame" "$apps/transhuman-mesh" --frame -1
-expect 2 "must be finite, not nan" "$apps/transhuman-mesh" --threshold nan
+expect 2 "must be >= 0, not nan" "$apps/transhuman-mesh" --threshold nan
 expect 2 "--limit" "$apps/transhuman-eval" --limit -5
 expect 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
 : > "$scratch/empty.yaml"

@@ -76,6 +76,35 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   const auto expected = th::train::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
   CHECK(torch::equal(image, expected.pred));
   CHECK(image.max().item<float>() > 0);  // not an all-black comparison
+
+  // A few rows at a time (how a large image keeps its memory bounded): the same pixels.
+  const int width = int(s.target_image.size(1)), height = int(s.target_image.size(0));
+  const auto banded = session.render(prepared, camera, width, height, int64_t(width) * 3);
+  CHECK((banded - image).abs().max().item<float>() <= 1e-6f);
+}
+
+TEST_CASE("too large renders and too fine mesh grids are refused before any work, with the estimate",
+          "[inference]") {
+  auto config = tiny_config();
+  config.max_memory_gb = 1;
+  const th::inference::Session session(config, torch::kCPU, tiny_checkpoint());
+  const fs::path out = th::test::scratch_dir("inference_resources");
+  th::inference::MeshRequest mesh;
+  mesh.voxel = 1e-4;  // 7 billion grid points over the tiny person's box
+  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"),
+                    Catch::Contains("mesh grid") && Catch::Contains("estimated peak memory") &&
+                        Catch::Contains("max_memory_gb=1"));
+  CHECK(!fs::exists(out / "mesh"));
+  mesh.voxel = 0.01;
+  mesh.threshold = -1;
+  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"), Catch::Contains(">= 0"));
+
+  VideoRequest r;
+  r.width = 20000;
+  r.height = 20000;
+  CHECK_THROWS_WITH(th::inference::render_video(session, r, out / "video"),
+                    Catch::Contains("render 20000 x 20000 x 36 frames") && Catch::Contains("max_memory_gb"));
+  CHECK(!fs::exists(out / "video" / "frames"));
 }
 
 TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, resumed and guarded",

@@ -1,0 +1,259 @@
+#!/usr/bin/env bash
+# Hostile input, reproduced (issue 13): crafts every bad file and request of the issue itself,
+# runs the executables on it and checks the exit code (2: a user error) and the one stderr line
+# naming the file, key or value. Prints a Markdown table of the cases and their outcomes.
+#
+#   scripts/hostile.sh [APPS_DIR] [TINY_DATASET]     (default build/apps; a fresh tiny dataset)
+#
+# Needs the built executables and Debian's python3 with numpy, torch and opencv (the packages of
+# scripts/install-deps.sh), which write the bad files. Also run by CTest (app_hostile_input).
+# Exit status 0 when every case behaves. TH_HOSTILE_TABLE=FILE also writes the table there.
+set -u
+repo=$(cd "$(dirname "$0")/.." && pwd)
+apps=$(cd "${1:-$repo/build/apps}" && pwd)
+py=${TH_PYTHON:-/usr/bin/python3}
+work=$(mktemp -d "${TMPDIR:-/tmp}/th-hostile.XXXXXX")
+trap 'rm -rf "$work"' EXIT
+cd "$repo"
+
+if [[ -n ${2:-} ]]; then
+  data=$(cd "$2" && pwd)
+else
+  data=$work/tiny
+  "$apps/transhuman-synth" --config configs/synth/tiny.yaml --out "$data" >/dev/null 2>&1 ||
+    { echo "hostile: cannot generate the tiny dataset"; exit 1; }
+fi
+
+rows=() failures=0
+# check NAME CODE FRAGMENT COMMAND...: the exit code, and for a failure the last stderr line
+# "<app>: error: ..." holding FRAGMENT, with no other error line (the log above it is fine), no
+# internal error and no crash, within 120 s.
+check() {
+  local name=$1 code=$2 fragment=$3
+  shift 3
+  local t0 err rc errors last ok=ok
+  t0=$(date +%s%N)
+  err=$(timeout 120 "$@" 2>&1 >/dev/null)
+  rc=$?
+  local ms=$((($(date +%s%N) - t0) / 1000000))
+  local secs=$((ms / 1000)).$((ms % 1000 / 100))
+  errors=$(printf '%s\n' "$err" | grep -c -E ': error:|internal error|terminate called|Segmentation|Aborted|AddressSanitizer')
+  last=$(printf '%s\n' "$err" | grep . | tail -1)
+  if [[ $rc -ne $code ]]; then
+    ok=FAIL
+  elif [[ $code -ne 0 && ( $errors -ne 1 || "$last" != *": error: "*"$fragment"* ) ]]; then
+    ok=FAIL
+  fi
+  [[ $ok == ok ]] || failures=$((failures + 1))
+  last=${last//$work/…}
+  last=${last//|/\\|}
+  ((${#last} > 240)) && last="${last:0:237}..."
+  rows+=("| $name | $code | $rc | $secs | $last | $ok |")
+  [[ $ok == ok ]] || echo "FAIL: $name: exit $rc (expected $code), $errors error line(s): $last" >&2
+}
+# check_ok NAME COMMAND...: must succeed (exit 0).
+check_ok() {
+  local name=$1
+  shift
+  check "$name" 0 "" "$@"
+}
+
+tiny=(--config tests/configs/tiny_train.yaml model.grouping.cache_dir="$work/kmeans" train.val_views=0)
+on() { echo "data.root=$1" "data.split_file=$1/split.yaml"; }
+# A copy of the dataset to damage.
+copy() {
+  rm -rf "$work/$1"
+  cp -r "$data" "$work/$1"
+  echo "$work/$1"
+}
+person=CoreView_s03  # the identity setting's person (what eval, render and mesh use)
+
+# The checkpoints the cases need: ours (two steps) and other models' ones.
+"$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --max-steps 2 >/dev/null 2>&1 ||
+  { echo "hostile: cannot train the tiny checkpoint"; exit 1; }
+ckpt=$work/run/checkpoints/latest.pt
+"$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/deep" --max-steps 1 model.transhe.depth=2 >/dev/null 2>&1
+"$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/spc" --max-steps 1 \
+  model.representation=spc_trilinear model.transhe.enabled=true >/dev/null 2>&1
+# Evaluating the checkpoint (one image): append data.root=... and --out.
+evaluate=("$apps/transhuman-eval" "${tiny[@]}" --checkpoint "$ckpt" eval.limit=1)
+
+# ---- 1. numbers in data: finite where they are read ----------------------------------------------
+d=$(copy nan_ref_R)
+"$py" - "$d/$person/annots.npy" <<'EOF'
+import sys, numpy as np
+a = np.load(sys.argv[1], allow_pickle=True).item()
+a['cams']['R'][0][0][0] = np.nan
+np.save(sys.argv[1], a)
+EOF
+check "NaN in a reference camera's R (annots.npy)" 2 "cams['R'][0] holds nan" "${evaluate[@]}" $(on "$d") --out "$work/e1"
+d=$(copy nan_target_T)
+"$py" - "$d/$person/annots.npy" <<'EOF'
+import sys, numpy as np
+a = np.load(sys.argv[1], allow_pickle=True).item()
+a['cams']['T'][3][1][0] = np.nan
+np.save(sys.argv[1], a)
+EOF
+check "NaN in the target camera's T" 2 "cams['T'][3] holds nan" "${evaluate[@]}" $(on "$d") --out "$work/e2"
+d=$(copy nan_vertices)
+"$py" - "$d/$person/new_vertices" <<'EOF'
+import sys, glob, numpy as np
+for f in glob.glob(sys.argv[1] + '/*.npy'):
+    v = np.load(f); v[5, 1] = np.nan; np.save(f, v)
+EOF
+check "NaN in new_vertices/*.npy" 2 "the vertices holds nan" "${evaluate[@]}" $(on "$d") --out "$work/e3"
+d=$(copy nan_th)
+"$py" - "$d/$person/new_params" <<'EOF'
+import sys, glob, numpy as np
+for f in glob.glob(sys.argv[1] + '/*.npy'):
+    p = np.load(f, allow_pickle=True).item(); p['Th'][0][1] = np.nan; np.save(f, p)
+EOF
+check "NaN in new_params Th" 2 "'Th' holds nan" "${evaluate[@]}" $(on "$d") --out "$work/e4"
+check "NaN in a camera, in training" 2 "cams['R'][0] holds nan" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$work/nan_ref_R") --out "$work/t_nan" --max-steps 1 \
+  data.train_setting=identity
+
+# ---- 2. run folders are never silently overwritten ------------------------------------------------
+check "train into a folder holding a run" 2 "or --resume to continue the run" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --max-steps 1
+check "--resume with another model key" 2 "model.dparf.nk (run: 3, now: 1)" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --resume model.dparf.nk=1
+"${evaluate[@]}" $(on "$data") --out "$work/e_used" >/dev/null 2>&1
+check "eval into a folder holding results" 2 "already holds" "${evaluate[@]}" $(on "$data") --out "$work/e_used"
+
+# ---- 3. checkpoints ------------------------------------------------------------------------------
+"$py" - "$ckpt" "$work/cut.pt" <<'EOF'
+import sys, zipfile
+src, dst = sys.argv[1:3]
+with zipfile.ZipFile(src) as z:
+    members = [(i, z.read(i)) for i in z.infolist()]
+big = max((m for m in members if '/data/' in m[0].filename), key=lambda m: len(m[1]))[0].filename
+with zipfile.ZipFile(dst, 'w', zipfile.ZIP_STORED) as z:
+    for info, data in members:
+        z.writestr(info.filename, data[: len(data) // 2] if info.filename == big else data)
+EOF
+check "storage record truncated inside a valid zip" 2 "cut.pt" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/cut.pt" --out "$work/e_cut"
+"$py" - "$ckpt" "$work/garbage_code.pt" <<'EOF'
+import sys, zipfile
+src, dst = sys.argv[1:3]
+with zipfile.ZipFile(src) as z, zipfile.ZipFile(dst, 'w', zipfile.ZIP_STORED) as out:
+    for i in z.infolist():
+        out.writestr(i.filename, b'def (((garbage\x00\xff' if '/code/' in i.filename else z.read(i))
+EOF
+check "garbage code/ entry" 2 "garbage_code.pt" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/garbage_code.pt" --out "$work/e_code"
+"$py" - "$ckpt" "$work/deflated.pt" <<'EOF'
+import sys, zipfile
+src, dst = sys.argv[1:3]
+with zipfile.ZipFile(src) as z, zipfile.ZipFile(dst, 'w', zipfile.ZIP_DEFLATED) as out:
+    for i in z.infolist():
+        out.writestr(i.filename, z.read(i))
+EOF
+check "deflated (repacked) checkpoint" 2 "compressed storage record" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/deflated.pt" --out "$work/e_defl"
+"$py" - "$work" <<'EOF'
+import sys, zipfile, collections, torch
+work = sys.argv[1]
+# A 2 MB deflate bomb that claims 2.3 GB: a zip of one compressed member.
+with zipfile.ZipFile(work + '/bomb.pth', 'w', zipfile.ZIP_DEFLATED) as z:
+    with z.open('archive/data.pkl', 'w', force_zip64=True) as f:
+        chunk = bytes(1 << 24)
+        for _ in range(140):
+            f.write(chunk)
+class View:  # a tensor view that torch.save pickles as _rebuild_tensor_v2(storage, ...)
+    def __init__(self, storage, offset, size, stride):
+        self.args = (storage, offset, size, stride)
+    def __reduce__(self):
+        s, o, size, stride = self.args
+        return (torch._utils._rebuild_tensor_v2, (s, o, size, stride, False, collections.OrderedDict()))
+storage = torch.zeros(4).storage()
+torch.save({'net': {'x': View(storage, 0, (1 << 30,), (0,))}}, work + '/stride0.pth')
+torch.save({'net': {'x': View(storage, 3, (4,), (-1,))}}, work + '/negative.pth')
+torch.save({'net': {'x': View(storage, 0, (100,), (1,))}}, work + '/past_end.pth')
+EOF
+check "deflate bomb (2 MB claiming 2.3 GB)" 2 "a compressed member claiming" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/bomb.pth" --out "$work/e_bomb"
+check "stride-0 view of 2^30 elements (.pth)" 2 "overlapping" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/stride0.pth" --out "$work/e_s0"
+check "negative stride (.pth)" 2 "negative" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/negative.pth" --out "$work/e_neg"
+check "view past its storage (.pth)" 2 "needs 100 elements" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/past_end.pth" --out "$work/e_past"
+check "checkpoint of transhe.depth=2" 2 "model.transhe.depth: checkpoint 2, config 1" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/deep/checkpoints/latest.pt" --out "$work/e_deep"
+check "checkpoint of another representation (spc)" 2 "model.representation: checkpoint spc_trilinear" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/spc/checkpoints/latest.pt" --out "$work/e_spc"
+for key in model.dparf.nk=2 model.grouping.num_tokens=20 model.dparf.coordinate=absolute model.fdi.raw_rgb=false; do
+  check "evaluated with $key" 2 "${key%%=*}: checkpoint" \
+    "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/e_${key//[.=]/_}" "$key"
+done
+check_ok "evaluated with model.dparf.nk=2 and eval.model_mismatch=warn" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/e_warn" model.dparf.nk=2 \
+  eval.model_mismatch=warn eval.limit=1
+
+# ---- 4. resources are checked before work starts --------------------------------------------------
+check "--threads 100000" 2 "--threads" "$apps/transhuman-render" --threads 100000
+check "threads: 100000 in the config" 2 "threads=100000" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run threads=100000
+check "mesh --voxel 1e-4 (a 10^11-point grid)" 2 "estimated peak memory" \
+  "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/m1" --voxel 1e-4 max_memory_gb=4
+check "render 20000 x 20000" 2 "render 20000 x 20000" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/r1" --width 20000 \
+  --height 20000 max_memory_gb=4
+check "mesh --threshold nan" 2 "--threshold: must be >= 0, not nan" "$apps/transhuman-mesh" --threshold nan
+check "mesh --threshold -1" 2 "--threshold: must be >= 0, not -1" "$apps/transhuman-mesh" --threshold -1
+
+# ---- 5. disk full: tests/apps/check_disk_full.sh (a 1 MB tmpfs; needs root) ----------------------
+if bash tests/apps/check_disk_full.sh "$apps" "$data" >"$work/disk_full.log" 2>&1; then
+  rows+=("| disk full while writing a checkpoint (1 MB tmpfs) | 2 | 2 | - | $(grep -o 'last stderr line: .*' "$work/disk_full.log" | cut -c 19-240 | sed "s|$work|…|g") | ok |")
+elif grep -q SKIP "$work/disk_full.log"; then
+  rows+=("| disk full while writing a checkpoint | 2 | - | - | skipped: no tmpfs can be mounted (not root) | skip |")
+else
+  rows+=("| disk full while writing a checkpoint | 2 | ? | - | $(tail -1 "$work/disk_full.log") | FAIL |")
+  failures=$((failures + 1))
+fi
+
+# ---- 6. invalid values are errors, never replaced by defaults ------------------------------------
+check "render --orbit 0" 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
+check "render --width -10" 2 "--width" "$apps/transhuman-render" --width -10
+check "mesh --frame -1" 2 "--frame" "$apps/transhuman-mesh" --frame -1
+check "eval --limit -5" 2 "--limit" "$apps/transhuman-eval" --limit -5
+check "train --max-steps -1" 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
+printf 'parent: %s\ntrain:\n  lr:\n' "$repo/configs/default.yaml" >"$work/null.yaml"
+check "lr: with no value" 2 "'train.lr' has no value" "$apps/transhuman-train" --dry-run --config "$work/null.yaml"
+printf 'parent: %s\nseed: 1\nseed: 2\n' "$repo/configs/default.yaml" >"$work/twice.yaml"
+check "duplicate YAML key" 2 "'seed' appears twice" "$apps/transhuman-train" --dry-run --config "$work/twice.yaml"
+: >"$work/empty.yaml"
+check "empty config file" 2 "is empty" "$apps/transhuman-train" --dry-run --config "$work/empty.yaml"
+check "missing configs/default.yaml (run elsewhere)" 2 "does not exist" \
+  sh -c "cd '$work' && '$apps/transhuman-train' --dry-run"
+check "a folder given as config" 2 "is a folder" "$apps/transhuman-train" --dry-run --config "$work"
+check "--dry-run when the data cannot be loaded" 2 "$work/nowhere" \
+  "$apps/transhuman-train" "${tiny[@]}" --dry-run data.root="$work/nowhere" data.split_file="$data/split.yaml"
+check "unknown flag" 2 "--bogus" "$apps/transhuman-eval" --bogus
+check "value out of range (was a 300-digit CLI11 range)" 2 "--threads" "$apps/transhuman-train" --threads -5
+
+# ---- 7. images -----------------------------------------------------------------------------------
+d=$(copy truncated_jpeg)
+for f in "$d/$person"/Camera_B1/*.jpg; do head -c "$(($(stat -c %s "$f") / 2))" "$f" >"$f.cut" && mv "$f.cut" "$f"; done
+check "truncated JPEG" 2 "is truncated" "${evaluate[@]}" $(on "$d") --out "$work/e_jpeg"
+d=$(copy mask_sizes)
+"$py" - "$d/$person/mask_cihp/Camera_B1" <<'EOF'
+import sys, glob, cv2
+for f in glob.glob(sys.argv[1] + '/*.png'):
+    m = cv2.imread(f, cv2.IMREAD_UNCHANGED)
+    cv2.imwrite(f, cv2.resize(m, (m.shape[1] // 2, m.shape[0] // 2), interpolation=cv2.INTER_NEAREST))
+EOF
+check "mask and mask_cihp of different sizes" 2 "mask_cihp" "${evaluate[@]}" $(on "$d") --out "$work/e_mask"
+
+table=$(
+  echo "| case | expected exit | exit | seconds | last stderr line | |"
+  echo "|---|---|---|---|---|---|"
+  printf '%s\n' "${rows[@]}"
+)
+echo "$table"
+[[ -n ${TH_HOSTILE_TABLE:-} ]] && echo "$table" >"$TH_HOSTILE_TABLE"
+echo
+echo "hostile: ${#rows[@]} cases, $failures failed"
+exit $((failures > 0))

@@ -1,0 +1,224 @@
+// Checkpoints are read without trusting them (issue 13): records, views, values, names, shapes
+// and the model settings they were trained with.
+#include <catch2/catch.hpp>
+#include <torch/torch.h>
+
+#include <cstring>
+#include <fstream>
+
+#include "core/config_io.hpp"
+#include "core/error.hpp"
+#include "io/bytes.hpp"
+#include "io/zip.hpp"
+#include "model/checked_load.hpp"
+#include "model/transhuman.hpp"
+#include "support/test_env.hpp"
+#include "train/trainer.hpp"
+
+namespace fs = std::filesystem;
+using th::Error;
+
+namespace {
+
+th::Config tiny_config(std::vector<std::string> overrides = {}) {
+  const auto root = th::test::tiny_dataset();
+  overrides.push_back("data.root=" + root.string());
+  overrides.push_back("data.split_file=" + (root / "split.yaml").string());
+  overrides.push_back("model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string());
+  return th::config::load<th::Config>("tests/configs/tiny_train.yaml", overrides);
+}
+
+th::model::TransHuman make_model(const th::Config& c) {
+  torch::manual_seed(3);
+  return th::model::TransHuman(c.model, c.render.cull_distance);
+}
+
+// Our checkpoint layout with the model alone (every record is a weight), optionally without
+// the stored model config (a checkpoint written before it was stored).
+void save_model_only(th::model::TransHumanImpl& model, const fs::path& file, bool with_config) {
+  torch::serialize::OutputArchive root, m;
+  model.save(m);
+  root.write("model", m);
+  if (with_config) th::model::write_model_config(root, model.config());
+  root.save_to(file.string());
+}
+
+// Rewrites the zip `file` with `edit` applied to its members (stored, as PyTorch writes).
+void rewrite_zip(const fs::path& file,
+                 const std::function<void(std::vector<std::pair<std::string, std::string>>&)>& edit) {
+  std::vector<std::pair<std::string, std::string>> members;
+  for (auto& m : th::io::detail::read_zip(th::io::detail::read_file(file), file.string()))
+    members.emplace_back(m.name, std::move(m.data));
+  edit(members);
+  th::io::detail::write_file_atomic(file, th::io::detail::write_zip(members));
+}
+
+std::string error_of(const std::function<void()>& fn) {
+  try {
+    fn();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+}  // namespace
+
+TEST_CASE("a checkpoint's weights load back exactly through the checked reader", "[train][checkpoint]") {
+  const auto c = tiny_config();
+  auto a = make_model(c);
+  const fs::path dir = th::test::scratch_dir("ckcheck_roundtrip");
+  save_model_only(*a, dir / "a.pt", true);
+  torch::manual_seed(99);
+  th::model::TransHuman b(c.model, c.render.cull_distance);
+  th::train::load_weights(*b, dir / "a.pt");
+  const auto pa = a->named_parameters(), pb = b->named_parameters();
+  for (const auto& p : pa) CHECK(torch::equal(p.value(), pb[p.key()]));
+}
+
+TEST_CASE("a storage record truncated inside a valid zip is refused, naming the file", "[train][checkpoint]") {
+  const auto c = tiny_config();
+  auto model = make_model(c);
+  const fs::path dir = th::test::scratch_dir("ckcheck_truncated"), file = dir / "cut.pt";
+  save_model_only(*model, file, true);
+  std::string cut;
+  rewrite_zip(file, [&](auto& members) {
+    size_t largest = 0, best = 0;
+    for (size_t i = 0; i < members.size(); ++i)
+      if (members[i].first.find("/data/") != std::string::npos && members[i].second.size() > largest)
+        largest = members[best = i].second.size();
+    REQUIRE(largest > 64);
+    cut = members[best].first;
+    members[best].second.resize(largest / 2);
+  });
+  INFO("truncated " << cut);
+  auto other = make_model(c);
+  const std::string message = error_of([&] { th::train::load_weights(*other, file); });
+  CHECK_THAT(message, Catch::Contains(file.string()));
+  CHECK_THAT(message, Catch::Contains("storage") || Catch::Contains("cannot be read"));
+}
+
+TEST_CASE("non-finite weights are refused naming the tensor and the index", "[train][checkpoint]") {
+  const auto c = tiny_config();
+  auto model = make_model(c);
+  {
+    torch::NoGradGuard no_grad;
+    model->heads->alpha_fc->weight[0][5] = std::nanf("");
+  }
+  const fs::path dir = th::test::scratch_dir("ckcheck_nan"), file = dir / "nan.pt";
+  save_model_only(*model, file, true);
+  auto other = make_model(c);
+  const std::string message = error_of([&] { th::train::load_weights(*other, file); });
+  CHECK_THAT(message, Catch::Contains("heads.alpha_fc.weight") && Catch::Contains("NaN") &&
+                          Catch::Contains("[0, 5]") && Catch::Contains(file.string()));
+}
+
+TEST_CASE("compressed storage records and inflated claims are refused from the zip directory alone",
+          "[train][checkpoint]") {
+  const fs::path dir = th::test::scratch_dir("ckcheck_deflate"), file = dir / "packed.pt";
+  // Stored zips whose method fields say deflate (a repacked file; a zip bomb claiming gigabytes):
+  // nothing is inflated or allocated.
+  auto write = [&](const std::string& member, uint32_t claimed) {
+    std::string zip = th::io::detail::write_zip({{member, std::string(100, 'x')}});
+    auto patch = [&](uint32_t signature, size_t method_at, size_t size_at) {
+      const std::string sig(reinterpret_cast<const char*>(&signature), 4);
+      for (size_t p = 0; (p = zip.find(sig, p)) != std::string::npos; ++p) {
+        zip[p + method_at] = 8;
+        std::memcpy(&zip[p + size_at], &claimed, 4);
+      }
+    };
+    patch(0x04034b50, 8, 22);   // local header: method, uncompressed size
+    patch(0x02014b50, 10, 24);  // central directory
+    th::io::detail::write_file_atomic(file, zip);
+  };
+  write("archive/data/0", 100);
+  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+             Catch::Contains("packed.pt/archive/data/0") && Catch::Contains("compressed storage record"));
+  auto model = make_model(tiny_config());
+  CHECK_THAT(error_of([&] { th::train::load_weights(*model, file); }), Catch::Contains("compressed storage record"));
+  write("archive/data.pkl", 0x7fffffff);
+  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+             Catch::Contains("archive/data.pkl") && Catch::Contains("claiming 2147483647 bytes"));
+  write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
+  CHECK_NOTHROW(th::model::check_checkpoint_archive(file));
+}
+
+TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]") {
+  using th::model::check_view;
+  CHECK_NOTHROW(check_view({2, 3}, {3, 1}, 0, 6, "v"));
+  CHECK_NOTHROW(check_view({3, 2}, {1, 3}, 0, 6, "v"));  // transposed
+  CHECK_NOTHROW(check_view({0, 1000000}, {1000000, 1}, 0, 0, "v"));  // empty
+  CHECK_THAT(error_of([] { check_view({2, 3}, {3, 1}, 1, 6, "t.pt: a tensor"); }),
+             Catch::Contains("t.pt: a tensor") && Catch::Contains("needs 7 elements"));
+  CHECK_THAT(error_of([] { check_view({4}, {-1}, 3, 6, "v"); }), Catch::Contains("negative"));
+  CHECK_THAT(error_of([] { check_view({-4}, {1}, 0, 6, "v"); }), Catch::Contains("negative"));
+  CHECK_THAT(error_of([] { check_view({2}, {1}, -1, 6, "v"); }), Catch::Contains("before its storage"));
+  // A 500-byte file must not become gigabytes: a stride-0 expansion is refused.
+  CHECK_THAT(error_of([] { check_view({1000000000, 1000}, {0, 0}, 0, 6, "v"); }), Catch::Contains("overlapping"));
+  CHECK_THAT(error_of([] { check_view({int64_t{1} << 40, int64_t{1} << 40}, {1, 1}, 0, 6, "v"); }),
+             Catch::Contains("v ("));
+  CHECK_THAT(error_of([] { check_view({2, 3}, {3}, 0, 6, "v"); }), Catch::Contains("strides"));
+}
+
+TEST_CASE("a checkpoint of other model settings names the keys; eval.model_mismatch=warn goes on",
+          "[train][checkpoint]") {
+  const auto c = tiny_config();
+  auto model = make_model(c);
+  const fs::path dir = th::test::scratch_dir("ckcheck_settings");
+  save_model_only(*model, dir / "stored.pt", true);
+
+  const auto other = tiny_config({"model.dparf.nk=2", "model.grouping.num_tokens=20"});
+  auto b = make_model(other);
+  const std::string message = error_of([&] { th::train::load_weights(*b, dir / "stored.pt"); });
+  CHECK_THAT(message, Catch::Contains("model.dparf.nk: checkpoint 3, config 2") &&
+                          Catch::Contains("model.grouping.num_tokens: checkpoint 24, config 20") &&
+                          Catch::Contains("eval.model_mismatch=warn"));
+  CHECK_NOTHROW(th::train::load_weights(*b, dir / "stored.pt", /*allow_model_mismatch=*/true));
+  CHECK(torch::equal(b->heads->alpha_fc->weight, model->heads->alpha_fc->weight));
+  // Settings that do not change the trained function are not compared.
+  auto direct = make_model(tiny_config({"model.exact_shortcuts=false"}));
+  CHECK_NOTHROW(th::train::load_weights(*direct, dir / "stored.pt"));
+
+  // A checkpoint without a stored config: its run's config.yaml (two folders up) is compared.
+  fs::create_directories(dir / "run" / "checkpoints");
+  save_model_only(*model, dir / "run" / "checkpoints" / "old.pt", false);
+  th::config::write_yaml(dir / "run" / "config.yaml", th::config::to_tree(tiny_config({"model.dparf.nk=5"})));
+  CHECK_THAT(error_of([&] { th::train::load_weights(*model, dir / "run" / "checkpoints" / "old.pt"); }),
+             Catch::Contains("model.dparf.nk: run config 5, config 3"));
+  // Without either, only shapes can be checked.
+  save_model_only(*model, dir / "bare.pt", false);
+  CHECK_NOTHROW(th::train::load_weights(*b, dir / "bare.pt"));
+}
+
+TEST_CASE("missing, extra and reshaped parameters name the config key that decides them", "[train][checkpoint]") {
+  const fs::path dir = th::test::scratch_dir("ckcheck_shapes");
+  auto load_into = [&](const th::Config& saved, const th::Config& wanted) {
+    auto a = make_model(saved);
+    save_model_only(*a, dir / "x.pt", false);
+    torch::serialize::InputArchive root, m;
+    root.load_from((dir / "x.pt").string());
+    root.read("model", m);
+    auto b = make_model(wanted);
+    return error_of([&] { th::model::load_module_checked(*b, m, "x.pt"); });
+  };
+  const auto one = tiny_config(), two = tiny_config({"model.transhe.depth=2"});
+  CHECK_THAT(load_into(two, one), Catch::Contains("holds module 'human.ViT.blocks.1'") &&
+                                      Catch::Contains("model.transhe.depth"));
+  CHECK_THAT(load_into(one, two), Catch::Contains("has no module 'human.ViT.blocks.1'") &&
+                                      Catch::Contains("model.transhe.depth"));
+  CHECK_THAT(load_into(one, tiny_config({"model.fdi.raw_rgb=false"})),
+             Catch::Contains("encoder.reduction_layer.weight") && Catch::Contains("model.fdi.raw_rgb"));
+  CHECK_THAT(load_into(one, tiny_config({"model.fdi.appearance=false"})),
+             Catch::Contains("fdi.alpha_res_0") && Catch::Contains("model.fdi.appearance"));
+  // Nothing was half-copied: a failed load leaves the model as it was.
+  auto b = make_model(one);
+  const auto before = b->heads->alpha_fc->weight.clone();
+  auto a = make_model(two);
+  {
+    torch::NoGradGuard no_grad;
+    a->heads->alpha_fc->weight.fill_(7);
+  }
+  save_model_only(*a, dir / "y.pt", false);
+  CHECK_THROWS_AS(th::train::load_weights(*b, dir / "y.pt"), Error);
+  CHECK(torch::equal(b->heads->alpha_fc->weight, before));
+}
