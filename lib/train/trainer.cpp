@@ -57,6 +57,11 @@ CheckpointState read_checkpoint(torch::serialize::InputArchive& root, model::Tra
   root.read("optimizer", o);
   model::load_module_checked(model, m, source);
   optim.load(o);
+  for (const auto& entry : optim.state()) {  // Adam's moments resume the run: finite too
+    const auto& state = static_cast<const torch::optim::AdamParamState&>(*entry.second);
+    model::check_finite(state.exp_avg(), source + ": optimiser state exp_avg");
+    model::check_finite(state.exp_avg_sq(), source + ": optimiser state exp_avg_sq");
+  }
   torch::Tensor epoch, step, iteration;
   root.read("epoch", epoch);
   root.read("step", step);

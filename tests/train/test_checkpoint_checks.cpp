@@ -222,3 +222,39 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
   CHECK_THROWS_AS(th::train::load_weights(*b, dir / "y.pt"), Error);
   CHECK(torch::equal(b->heads->alpha_fc->weight, before));
 }
+
+TEST_CASE("a resumed run's optimiser state must be finite too", "[train][checkpoint]") {
+  torch::set_num_threads(1);
+  const auto c = tiny_config({"train.val_views=0"});
+  const fs::path run = th::test::scratch_dir("ckcheck_adam"), latest = run / "checkpoints" / "latest.pt";
+  th::train::train(c, torch::kCPU, {run, false, 1});
+  // The same checkpoint with a NaN in Adam's first moment (trainer.cpp's layout).
+  torch::serialize::InputArchive root, m, o;
+  root.load_from(latest.string());
+  root.read("model", m);
+  root.read("optimizer", o);
+  auto model = make_model(c);
+  model->load(m);
+  torch::optim::Adam optim(model->parameters(), torch::optim::AdamOptions(c.train.lr));
+  optim.load(o);
+  REQUIRE_FALSE(optim.state().empty());
+  {
+    auto& state = static_cast<torch::optim::AdamParamState&>(*optim.state().begin()->second);
+    torch::NoGradGuard no_grad;
+    state.exp_avg().view(-1)[0] = std::nanf("");
+  }
+  torch::serialize::OutputArchive out, m2, o2;
+  model->save(m2);
+  optim.save(o2);
+  out.write("model", m2);
+  th::model::write_model_config(out, model->config());
+  out.write("optimizer", o2);
+  for (const char* key : {"epoch", "step", "iteration"}) {
+    torch::Tensor t;
+    root.read(key, t);
+    out.write(key, t);
+  }
+  out.save_to(latest.string());
+  CHECK_THAT(error_of([&] { th::train::train(c, torch::kCPU, {run, true, 2}); }),
+             Catch::Contains("optimiser state exp_avg") && Catch::Contains("NaN") && Catch::Contains("latest.pt"));
+}
