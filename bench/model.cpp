@@ -22,6 +22,7 @@
 #include <c10/util/ThreadLocalDebugInfo.h>
 
 #include "core/runtime.hpp"
+#include "core/torch_compat.hpp"
 #include "model/transhuman.hpp"
 #include "render/progressive.hpp"
 
@@ -51,8 +52,10 @@ int64_t status_kb(const char* key) {
 // MemoryReportingInfoBase while one is installed).
 struct TensorMemoryHook : c10::MemoryReportingInfoBase {
   int64_t base = -1, peak = 0;
-  void reportMemoryUsage(void*, int64_t size, int64_t total_allocated, int64_t, c10::Device device) override {
+  void reportMemoryUsage(void*, int64_t size, th::compat::MemoryTotal total, th::compat::MemoryTotal,
+                         c10::Device device) override {
     if (!device.is_cpu()) return;
+    const auto total_allocated = static_cast<int64_t>(total);
     if (base < 0) base = total_allocated - size;
     peak = std::max(peak, total_allocated - base);
   }

@@ -3,6 +3,7 @@
 // (Debian 13's 2.6, the official archives, the LibTorch inside a PyTorch installation) build
 // from the same code through the names below. Nothing else tests TORCH_VERSION_*.
 
+#include <c10/core/Allocator.h>
 #include <torch/version.h>
 
 #if TORCH_VERSION_MAJOR >= 2
@@ -21,5 +22,16 @@ using CollectiveGroup = c10d::Backend;
 #else
 using CollectiveGroup = c10d::ProcessGroup;
 #endif
+
+// The type of the totals that c10's allocator reports to a MemoryReportingInfoBase (int64_t in
+// 1.13, size_t in 2.x), read from the declaration itself rather than from a version number.
+namespace detail {
+template <class F> struct third_argument;
+template <class C, class R, class A1, class A2, class A3, class A4, class A5>
+struct third_argument<R (C::*)(A1, A2, A3, A4, A5)> {
+  using type = A3;
+};
+}  // namespace detail
+using MemoryTotal = detail::third_argument<decltype(&c10::MemoryReportingInfoBase::reportMemoryUsage)>::type;
 
 }  // namespace th::compat
