@@ -60,10 +60,8 @@ const std::vector<std::pair<std::string, std::string>>& renames() {
   return r;
 }
 
-}  // namespace
-
-std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
-                                                          const std::string& entry) {
+std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path& path,
+                                                    const std::string& entry) {
   const std::string source = path.string();
   if (!std::filesystem::exists(path)) fail("checkpoint '", source, "' does not exist");
   std::unique_ptr<caffe2::serialize::PyTorchStreamReader> reader;
@@ -102,8 +100,9 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
       if (!reader->hasRecord(record)) fail(source, ": missing storage record '", record, "'");
       const auto [data, size] = reader->getRecord(record);
       const int64_t itemsize = static_cast<int64_t>(c10::elementSize(dtype));
-      if (static_cast<int64_t>(size) != numel * itemsize)
-        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel * itemsize);
+      if (numel < 0 || size % static_cast<size_t>(itemsize) != 0 ||
+          static_cast<int64_t>(size / static_cast<size_t>(itemsize)) != numel)
+        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel, " elements of ", itemsize, " bytes");
       auto tensor = torch::empty({numel}, dtype);
       std::memcpy(tensor.data_ptr(), data.get(), size);
       if (swap_bytes && itemsize > 1) {
@@ -154,6 +153,19 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   flatten(net ? *net : root, "", out);
   if (out.empty()) fail(source, ": no tensors found", net ? " under '" + entry + "'" : std::string());
   return out;
+}
+
+}  // namespace
+
+std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
+                                                          const std::string& entry) {
+  // LibTorch's zip reader throws c10::Error for a corrupt record (a damaged local header, data
+  // past the end): the file's error like any other, not a bug.
+  try {
+    return read_state_dict(path, entry);
+  } catch (const c10::Error& e) {
+    fail(path.string(), ": corrupt PyTorch checkpoint (", e.what_without_backtrace(), ")");
+  }
 }
 
 std::string reference_name(const std::string& name) {
