@@ -23,12 +23,47 @@ void merge_into(YAML::Node base, const YAML::Node& over) {
   }
 }
 
+// More nodes than any config has, and few enough to walk in well under a second.
+constexpr size_t kMaxNodes = size_t{1} << 18;
+
+// Aliases make the YAML tree a graph: `a: &x {b: *x}` is a cycle, and a chain of maps that each
+// alias the one before twice doubles with every line (30 lines: 2^30 nodes). Everything after
+// this check (merging, cloning, the typed reader) walks the tree, so refuse cycles, count the
+// nodes the aliases expand to, and make sure every map key is a plain name.
+void check_graph(const YAML::Node& node, const std::string& path, const std::string& source,
+                 std::vector<YAML::Node>& ancestors, size_t& nodes) {
+  if (++nodes > kMaxNodes)
+    fail(source, ": more than ", kMaxNodes, " values (aliases repeat too much)");
+  if (!node.IsMap() && !node.IsSequence()) return;
+  for (const YAML::Node& a : ancestors)
+    if (a.is(node)) fail(source, ": '", path, "' contains itself (an alias cycle)");
+  ancestors.push_back(node);
+  size_t index = 0;
+  for (const auto& item : node) {
+    if (node.IsSequence()) {
+      check_graph(item, path + "[" + std::to_string(index++) + "]", source, ancestors, nodes);
+      continue;
+    }
+    if (!item.first.IsScalar())
+      fail(source, ": a key ", path.empty() ? "" : "under '" + path + "' ", "is not a plain name");
+    const std::string key = item.first.Scalar();
+    check_graph(item.second, path.empty() ? key : path + "." + key, source, ancestors, nodes);
+  }
+  ancestors.pop_back();
+}
+
+void check_graph(const YAML::Node& node, const std::string& source) {
+  std::vector<YAML::Node> ancestors;
+  size_t nodes = 0;
+  check_graph(node, "", source, ancestors, nodes);
+}
+
 // Every key of a config file has a value and appears once per section (yaml-cpp would give a
 // key without value as null, which reads as "use the default", and keep duplicate keys).
 void check_values(const YAML::Node& node, const std::string& path, const fs::path& file) {
   std::set<std::string> keys;
   for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
+    const std::string key = kv.first.Scalar();
     const std::string full = path.empty() ? key : path + "." + key;
     if (!keys.insert(key).second) fail("config file '", file.string(), "': key '", full, "' appears twice");
     if (kv.second.IsNull() && full != "parent")
@@ -56,6 +91,7 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
   if (node.IsNull())
     fail("config file '", file.string(), "' is empty (a config names at least its parent: 'parent: default.yaml')");
   if (!node.IsMap()) fail("config file '", file.string(), "' must hold a map of keys");
+  check_graph(node, "config file '" + file.string() + "'");
   check_values(node, "", file);
 
   const YAML::Node parent = node["parent"];
@@ -111,6 +147,7 @@ void apply_override(YAML::Node& root, const std::string& text) {
   } catch (const YAML::Exception& e) {
     fail("override '", text, "': cannot parse value '", raw, "': ", e.msg);
   }
+  check_graph(value, "override '" + text + "'");
 
   // Walk down with fresh handles (yaml-cpp nodes are references; reassigning would alias).
   std::vector<YAML::Node> nodes{root};

@@ -47,10 +47,8 @@ const std::vector<std::pair<std::string, std::string>>& renames() {
   return r;
 }
 
-}  // namespace
-
-std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
-                                                          const std::string& entry) {
+std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path& path,
+                                                    const std::string& entry) {
   const std::string source = path.string();
   check_checkpoint_archive(path);  // stored records inside the file: no allocation beyond its size
   std::unique_ptr<caffe2::serialize::PyTorchStreamReader> reader;
@@ -140,6 +138,19 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
   flatten(net ? *net : root, "", out);
   if (out.empty()) fail(source, ": no tensors found", net ? " under '" + entry + "'" : std::string());
   return out;
+}
+
+}  // namespace
+
+std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
+                                                          const std::string& entry) {
+  // LibTorch's zip reader throws c10::Error for a corrupt record (a damaged local header, data
+  // past the end): the file's error like any other, not a bug.
+  try {
+    return read_state_dict(path, entry);
+  } catch (const c10::Error& e) {
+    fail(path.string(), ": corrupt PyTorch checkpoint (", e.what_without_backtrace(), ")");
+  }
 }
 
 std::string reference_name(const std::string& name) {

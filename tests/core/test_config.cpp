@@ -120,6 +120,26 @@ TEST_CASE("missing files and inheritance cycles are reported with the file name"
   CHECK_THAT(message_of([&] { load<Config>(dir / "bad.yaml"); }), Catch::Contains("YAML error at line"));
 }
 
+TEST_CASE("keys that are not names and self-referring or exploding aliases are refused", "[config]") {
+  const fs::path dir = th::test::scratch_dir("config_graph");
+  // Found by fuzz/config_fuzz: a YAML::BadConversion escaped, a stack overflow, a hang.
+  write_file(dir, "list_key.yaml", "? [a, b]\n: 1\n");
+  CHECK_THAT(message_of([&] { load<Config>(dir / "list_key.yaml"); }),
+             Catch::Contains("list_key.yaml'") && Catch::Contains("is not a plain name"));
+  write_file(dir, "cycle.yaml", "train: &x {lr: *x}\n");
+  CHECK_THAT(message_of([&] { load<Config>(dir / "cycle.yaml"); }),
+             Catch::Contains("cycle.yaml'") && Catch::Contains("'train.lr' contains itself"));
+  std::string doubling = "l0: &a0 {x: 1, y: 2}\n";  // 2^40 values once the aliases expand
+  for (int i = 1; i <= 40; ++i)
+    doubling += "l" + std::to_string(i) + ": &a" + std::to_string(i) + " {p: *a" +
+                std::to_string(i - 1) + ", q: *a" + std::to_string(i - 1) + "}\n";
+  write_file(dir, "doubling.yaml", doubling);
+  CHECK_THAT(message_of([&] { load<Config>(dir / "doubling.yaml"); }),
+             Catch::Contains("doubling.yaml'") && Catch::Contains("aliases repeat too much"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"train.lr=&x [*x]"}); }),
+             Catch::Contains("override 'train.lr=&x [*x]'") && Catch::Contains("contains itself"));
+}
+
 TEST_CASE("the resolved config written to disk loads back to the same values", "[config]") {
   const fs::path dir = th::test::scratch_dir("config_resolved");
   const Config c = load<Config>("configs/default.yaml", {"train.lr=0.123", "model.fdi.raw_rgb=false"});

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "core/error.hpp"
+#include "io/bytes.hpp"
 #include "model/checkpoint_import.hpp"
 #include "support/test_env.hpp"
 
@@ -114,4 +115,20 @@ TEST_CASE("a big-endian torch.save checkpoint imports byte-swapped",
   check_contents(read_torch_state_dict(fixtures() / "every_dtype_big.pth", "net"));
   CHECK_THROWS_WITH(read_torch_state_dict(fixtures() / "bad_byteorder.pth", "net"),
                     Catch::Contains("byteorder") && Catch::Contains("middle"));
+}
+
+TEST_CASE("a checkpoint with a corrupt storage record fails naming the file",
+          "[model][checkpoint][python]") {
+  // LibTorch's zip reader threw c10::Error past read_torch_state_dict for a record whose local
+  // header is damaged (it does not check CRCs, so a damaged header is what it notices).
+  std::string bytes = io::detail::read_file(fixtures() / "every_dtype.pth");
+  const size_t name = bytes.find("/data/0");  // first in the local header of that record
+  REQUIRE(name != std::string::npos);
+  const size_t header = bytes.rfind("PK\x03\x04", name);
+  REQUIRE(header != std::string::npos);
+  bytes[header + 3] = '\x05';  // no longer a local header signature
+  const auto file = test::scratch_dir("torch_save_formats_corrupt") / "bad_header.pth";
+  std::ofstream(file, std::ios::binary) << bytes;
+  CHECK_THROWS_AS(read_torch_state_dict(file, "net"), th::Error);
+  CHECK_THROWS_WITH(read_torch_state_dict(file, "net"), Catch::Contains("bad_header.pth"));
 }
