@@ -103,12 +103,20 @@ void check_checkpoint_archive(const fs::path& path) {
       fail(where, ": a compressed member claiming ", entry.size, " bytes from ", entry.compressed_size,
            " (a checkpoint's compressed members are small code files)");
   }
+  // <archive>/data.pkl and <archive>/version, as torch.save and LibTorch write them (LibTorch's
+  // reader is not opened on anything else: it leaks when its constructor throws).
+  bool pickle = false, version = false;
   for (const auto& entry : entries) {
-    const auto slash = entry.name.rfind('/');
-    if (entry.name.compare(slash + 1, std::string::npos, "data.pkl") == 0 &&
-        entry.name.find('/') == slash)  // <archive>/data.pkl, not a nested one
-      check_storage_records(source, entries, path.string(), entry.name);
+    const auto slash = entry.name.find('/');
+    if (slash == std::string::npos || entry.name.find('/', slash + 1) != std::string::npos) continue;
+    const std::string leaf = entry.name.substr(slash + 1);
+    version = version || leaf == "version";
+    if (leaf != "data.pkl") continue;
+    pickle = true;
+    check_storage_records(source, entries, path.string(), entry.name);
   }
+  if (!pickle || !version)
+    fail(path.string(), ": not a PyTorch checkpoint (no <archive>/", pickle ? "version" : "data.pkl", " record)");
 }
 
 namespace {

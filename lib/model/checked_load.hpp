@@ -25,7 +25,8 @@ namespace th::model {
 // Throws th::Error naming the file and the member when the zip is malformed, a member's data
 // runs past the end of the file, a storage record (…/data/…) is compressed, a compressed
 // member claims more than 64 MiB or more than deflate can expand to, or a storage record is not
-// the size its pickle (data.pkl) claims. Reads the directory and data.pkl, not the records.
+// the size its pickle (data.pkl) claims, or <archive>/data.pkl or <archive>/version is missing.
+// Reads the directory and data.pkl, not the records.
 void check_checkpoint_archive(const std::filesystem::path& path);
 
 // The element type of a pickled storage class ("torch.FloatStorage"); th::Error naming

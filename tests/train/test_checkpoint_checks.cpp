@@ -119,16 +119,20 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
   // Stored zips whose method fields say deflate (a repacked file; a zip bomb claiming gigabytes):
   // nothing is inflated or allocated.
   auto write = [&](const std::string& member, uint32_t claimed) {
-    std::string zip = th::io::detail::write_zip({{member, std::string(100, 'x')}});
-    auto patch = [&](uint32_t signature, size_t method_at, size_t size_at) {
+    const std::string empty_dict_pickle = "\x80\x02}q\x00.";
+    std::string zip = th::io::detail::write_zip(
+        {{"archive/version", "3\n"}, {"archive/data.pkl", empty_dict_pickle}, {member, std::string(100, 'x')}});
+    // The member's local header and central directory entry: method 8, `claimed` bytes.
+    auto patch = [&](uint32_t signature, size_t method_at, size_t size_at, size_t name_at) {
       const std::string sig(reinterpret_cast<const char*>(&signature), 4);
       for (size_t p = 0; (p = zip.find(sig, p)) != std::string::npos; ++p) {
+        if (zip.compare(p + name_at, member.size(), member) != 0) continue;
         zip[p + method_at] = 8;
         std::memcpy(&zip[p + size_at], &claimed, 4);
       }
     };
-    patch(0x04034b50, 8, 22);   // local header: method, uncompressed size
-    patch(0x02014b50, 10, 24);  // central directory
+    patch(0x04034b50, 8, 22, 30);   // local header: method, uncompressed size, name
+    patch(0x02014b50, 10, 24, 46);  // central directory
     th::io::detail::write_file_atomic(file, zip);
   };
   write("archive/data/0", 100);
@@ -141,6 +145,10 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
              Catch::Contains("archive/data.pkl") && Catch::Contains("claiming 2147483647 bytes"));
   write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
   CHECK_NOTHROW(th::model::check_checkpoint_archive(file));
+  // LibTorch's reader is not opened on a zip that is not a checkpoint.
+  th::io::detail::write_file_atomic(file, th::io::detail::write_zip({{"archive/data.pkl", "\x80\x02}q\x00."}}));
+  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+             Catch::Contains("not a PyTorch checkpoint (no <archive>/version record)"));
 }
 
 TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]") {
