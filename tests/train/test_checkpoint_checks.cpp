@@ -119,7 +119,7 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
   // Stored zips whose method fields say deflate (a repacked file; a zip bomb claiming gigabytes):
   // nothing is inflated or allocated.
   auto write = [&](const std::string& member, uint32_t claimed) {
-    const std::string empty_dict_pickle = "\x80\x02}q\x00.";
+    const std::string empty_dict_pickle("\x80\x02}q\x00.", 6);
     std::string zip = th::io::detail::write_zip(
         {{"archive/version", "3\n"}, {"archive/data.pkl", empty_dict_pickle}, {member, std::string(100, 'x')}});
     // The member's local header and central directory entry: method 8, `claimed` bytes.
@@ -146,7 +146,7 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
   write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
   CHECK_NOTHROW(th::model::check_checkpoint_archive(file));
   // LibTorch's reader is not opened on a zip that is not a checkpoint.
-  th::io::detail::write_file_atomic(file, th::io::detail::write_zip({{"archive/data.pkl", "\x80\x02}q\x00."}}));
+  th::io::detail::write_file_atomic(file, th::io::detail::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
   CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
              Catch::Contains("not a PyTorch checkpoint (no <archive>/version record)"));
 }
