@@ -34,4 +34,14 @@ struct third_argument<R (C::*)(A1, A2, A3, A4, A5)> {
 }  // namespace detail
 using MemoryTotal = detail::third_argument<decltype(&c10::MemoryReportingInfoBase::reportMemoryUsage)>::type;
 
+// c10d's TCPStore: from 2.x on its options ask for the libuv backend by default, which builds
+// without libuv (Debian 13's 2.6) refuse at rendezvous; the classic backend works everywhere.
+// Detected from the member itself (1.13 has none).
+template <class Options>
+auto use_classic_tcpstore(Options& options, int) -> decltype(options.useLibUV = false, void()) {
+  options.useLibUV = false;
+}
+template <class Options>
+void use_classic_tcpstore(Options&, long) {}
+
 }  // namespace th::compat

@@ -118,6 +118,7 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
   so.numWorkers = size_t(world_size_);
   so.waitWorkers = true;
   so.timeout = timeout;
+  compat::use_classic_tcpstore(so, 0);
   try {
     store_ = c10::make_intrusive<c10d::TCPStore>(env.master_addr, so);
   } catch (const std::exception& e) {
