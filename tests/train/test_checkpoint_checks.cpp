@@ -13,6 +13,7 @@
 #include "model/checked_load.hpp"
 #include "model/transhuman.hpp"
 #include "support/test_env.hpp"
+#include "support/tiny_config.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -21,11 +22,7 @@ using th::Error;
 namespace {
 
 th::Config tiny_config(std::vector<std::string> overrides = {}) {
-  const auto root = th::test::tiny_dataset();
-  overrides.push_back("data.root=" + root.string());
-  overrides.push_back("data.split_file=" + (root / "split.yaml").string());
-  overrides.push_back("model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string());
-  return th::config::load<th::Config>("tests/configs/tiny_train.yaml", overrides);
+  return th::test::tiny_train_config(std::move(overrides));
 }
 
 th::model::TransHuman make_model(const th::Config& c) {

@@ -14,17 +14,14 @@
 #include "train/trainer.hpp"
 #include "train/validation.hpp"
 #include "support/test_env.hpp"
+#include "support/tiny_config.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
 th::Config tiny_config(std::vector<std::string> overrides = {}) {
-  const auto root = th::test::tiny_dataset();
-  overrides.push_back("data.root=" + root.string());
-  overrides.push_back("data.split_file=" + (root / "split.yaml").string());
-  overrides.push_back("model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string());
-  return th::config::load<th::Config>("tests/configs/tiny_train.yaml", overrides);
+  return th::test::tiny_train_config(std::move(overrides));
 }
 
 std::map<std::string, torch::Tensor> weights_of(const fs::path& checkpoint, const th::Config& c) {
