@@ -32,7 +32,7 @@ endfunction()
 
 # th_test(<name> DEPS <targets...>): a Catch2 executable of every .cpp in the calling folder,
 # registered with CTest test by test. Tests run with the repository as working directory and
-# TH_TEST_TMP pointing at a scratch folder in the build tree.
+# their scratch folders under the build tree's test_tmp (tests/support/test_env.hpp).
 function(th_test name)
   cmake_parse_arguments(ARG "" "" "DEPS;PROPERTIES" ${ARGN})
   file(GLOB sources CONFIGURE_DEPENDS ${CMAKE_CURRENT_SOURCE_DIR}/*.cpp)
@@ -50,9 +50,13 @@ function(th_test name)
     target_link_libraries(${name} PRIVATE Catch2::Catch2 ${ARG_DEPS})
   endif()
   target_include_directories(${name} PRIVATE ${PROJECT_SOURCE_DIR}/tests)
+  # Compiled in, not passed as CTest ENVIRONMENT: Catch2 3's catch_discover_tests flattens a
+  # list-valued property (only the first variable survived). See tests/support/test_env.hpp.
+  target_compile_definitions(${name} PRIVATE TH_TEST_BUILD_DIR="${CMAKE_BINARY_DIR}"
+                                             TH_TEST_PYTHON="${TH_PYTHON}")
   th_use_pch(${name})
   catch_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
     TEST_PREFIX "${name}:"
-    PROPERTIES ENVIRONMENT "TH_TEST_TMP=${CMAKE_BINARY_DIR}/test_tmp;TH_PYTHON=${TH_PYTHON};TH_BUILD_DIR=${CMAKE_BINARY_DIR}" ${ARG_PROPERTIES})
+    PROPERTIES ${ARG_PROPERTIES})
 endfunction()

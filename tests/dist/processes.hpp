@@ -7,7 +7,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -17,12 +19,11 @@
 #include <thread>
 #include <vector>
 
+#include "support/test_env.hpp"
+
 namespace th::test {
 
-inline std::filesystem::path train_executable() {
-  const char* build = std::getenv("TH_BUILD_DIR");
-  return std::filesystem::path(build ? build : "build") / "apps" / "transhuman-train";
-}
+inline std::filesystem::path train_executable() { return build_dir() / "apps" / "transhuman-train"; }
 
 struct Process {
   pid_t pid = -1;
@@ -49,6 +50,9 @@ inline Process spawn(const std::vector<std::string>& args, const std::vector<std
       ::dup2(fd, 2);
     }
     ::execve(argv[0], argv.data(), envp.data());
+    // Into the log: the test prints it, and "exit 127" alone says nothing.
+    const std::string why = std::string("cannot run ") + argv[0] + ": " + std::strerror(errno) + "\n";
+    (void)!::write(2, why.data(), why.size());
     ::_exit(127);
   }
   return {pid, log};

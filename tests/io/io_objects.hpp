@@ -18,6 +18,7 @@
 #include "core/error.hpp"
 #include "io/npy.hpp"
 #include "io/pickle.hpp"
+#include "support/bytes.hpp"
 #include "support/test_env.hpp"
 
 namespace th::test {
@@ -37,19 +38,20 @@ inline std::string read_bytes(const fs::path& path) {
 // the script changes); a lock keeps test processes that ctest runs in parallel from racing.
 inline fs::path io_fixtures() {
   static const fs::path dir = [] {
-    const char* root_env = std::getenv("TH_TEST_TMP");
-    const fs::path root = root_env ? fs::path(root_env) : fs::temp_directory_path();
+    const fs::path root = th::test::test_tmp_root();
     fs::create_directories(root);
     const fs::path out = root / "io_fixtures";
     const fs::path script = "tests/python/make_io_fixtures.py";
     const fs::path objects = "tests/python/npy_pickle_objects.py";
+    const fs::path format = "tests/python/numpy1_format.py";
     const int lock = ::open((root / "io_fixtures.lock").c_str(), O_CREAT | O_RDWR, 0644);
     REQUIRE(lock >= 0);
     ::flock(lock, LOCK_EX);
     const fs::path done = out / "DONE";
     const bool fresh = fs::exists(done) &&
                        fs::last_write_time(done) >= fs::last_write_time(script) &&
-                       fs::last_write_time(done) >= fs::last_write_time(objects);
+                       fs::last_write_time(done) >= fs::last_write_time(objects) &&
+                       fs::last_write_time(done) >= fs::last_write_time(format);
     int rc = 0;
     if (!fresh) {
       fs::remove_all(out);
