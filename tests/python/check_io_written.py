@@ -19,6 +19,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import npy_pickle_objects as objs  # noqa: E402
+import numpy1_format  # noqa: E402
 
 failures = []
 
@@ -49,7 +50,7 @@ def compare_bytes(name, got, want, pickled=False):
 
 def npy_bytes(array):
     out = io.BytesIO()
-    np.save(out, array, allow_pickle=True)
+    numpy1_format.save(out, array)
     return out.getvalue()
 
 

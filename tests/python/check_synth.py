@@ -18,6 +18,9 @@ import scipy.ndimage
 import scipy.sparse
 from PIL import Image
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import numpy1_format  # noqa: E402  (np.save as numpy 1.x wrote it, under numpy 2 too)
+
 
 def fail(msg):
     print("check_synth: FAILED: " + msg)
@@ -157,9 +160,9 @@ def check_human(root, human, V, args):
         expect(min(near_fractions) >= 0.999, human + ": vertices more than 1 px outside the masks")
 
     if args.resave:
-        np.save(os.path.join(args.resave, human + "_annots.npy"), annots)
+        numpy1_format.save(os.path.join(args.resave, human + "_annots.npy"), annots)
         params = np.load(os.path.join(d, params_dir, "%d.npy" % offset), allow_pickle=True).item()
-        np.save(os.path.join(args.resave, human + "_params.npy"), params)
+        numpy1_format.save(os.path.join(args.resave, human + "_params.npy"), params)
 
 
 def main():

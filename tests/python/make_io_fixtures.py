@@ -20,6 +20,7 @@ import scipy.sparse
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import npy_pickle_objects as objs  # noqa: E402
+import numpy1_format  # noqa: E402
 
 
 # A stand-in for chumpy (not installed): pickles as chumpy.ch.Ch through
@@ -310,10 +311,10 @@ def main():
         f.write(np.arange(6, dtype='<f8').tobytes())
 
     # Object .npy as ZJU-MoCap ships them.
-    np.save(path('annots.npy'), objs.annots())
-    np.save(path('params.npy'), objs.params())
-    np.save(path('annots_small.npy'), objs.annots(ncams=2, nframes=1))
-    np.save(path('object_1d.npy'), np.array([1, 'a', None], dtype=object))
+    numpy1_format.save(path('annots.npy'), objs.annots())
+    numpy1_format.save(path('params.npy'), objs.params())
+    numpy1_format.save(path('annots_small.npy'), objs.annots(ncams=2, nframes=1))
+    numpy1_format.save(path('object_1d.npy'), np.array([1, 'a', None], dtype=object))
 
     # .npz stored and deflated.
     np.savez(path('arrays.npz'), a=objs.dtype_values('f8'), b=objs.dtype_values('i4'), c=objs.dtype_values('b1'))

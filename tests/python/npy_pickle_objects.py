@@ -6,8 +6,13 @@ Strings are written as literals, the way a script would build such dicts: the pi
 under test reproduces what CPython writes for them (equal literals are one object).
 """
 import collections
+import os
+import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import numpy1_format  # noqa: E402,F401  (numpy 2 pickles with numpy 1.x's names from here on)
 
 DTYPE_CODES = ['f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8', 'u1', 'u2', 'u4', 'b1']
 WRITABLE_CODES = ['f2', 'f4', 'f8', 'i1', 'i2', 'i4', 'i8', 'u1', 'b1']
