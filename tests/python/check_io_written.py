@@ -5,10 +5,13 @@ Usage: check_io_written.py <mode> <dir>
   npy      npy_<code>.npy (and scalar/empty/1d/transposed): values, and bytes == np.save
   objects  annots.npy, params.npy: values, and bytes == np.save(dict); writes py_*.npy
   pickle   writer_p{2,3,4}.pkl, big_p{2,3,4}.pkl, batches_p{2,3,4}.pkl: bytes == pickle.dumps
+           (CPython 3.11 + numpy 1.x), elsewhere SHA-256 == tests/python/pickle_digests.txt
+  digests  writes tests/python/pickle_digests.txt (run in the reference environment only)
   sets     set_p{2,3,4}.pkl: pickle.loads equals {'s': {1, 'a', (2, 3)}, 'e': set()}
   npz      arrays.npz: np.load values; writes py_arrays.npz (np.savez_compressed)
 Exit status 0 when everything matches; otherwise the mismatches are printed.
 """
+import hashlib
 import io
 import os
 import pickle
@@ -81,16 +84,52 @@ def check_objects(d):
         np.save(os.path.join(d, 'py_' + name + '.npy'), got)
 
 
+PICKLE_OBJECTS = (('writer', objs.writer_object), ('big', objs.writer_big_object),
+                  ('batches', objs.writer_batches_object))
+DIGESTS = os.path.join(os.path.dirname(os.path.abspath(__file__)), 'pickle_digests.txt')
+
+
+def sha256(data):
+    return hashlib.sha256(data).hexdigest()
+
+
+def read_digests():
+    with open(DIGESTS) as f:
+        return dict(line.split() for line in f if line.strip() and not line.startswith('#'))
+
+
 def check_pickle(d):
-    for base, make in (('writer', objs.writer_object), ('big', objs.writer_big_object),
-                       ('batches', objs.writer_batches_object)):
+    digests = read_digests()
+    if not numpy1_format.REFERENCE_ENVIRONMENT:
+        print('note: Python %d.%d, numpy %s: comparing with the digests of CPython 3.11 + numpy 1.x'
+              % (sys.version_info[0], sys.version_info[1], np.__version__))
+    for base, make in PICKLE_OBJECTS:
         for proto in (2, 3, 4):
             name = '%s_p%d.pkl' % (base, proto)
             data = read(os.path.join(d, name))
             msg = objs.equal(pickle.loads(data), make(), name)
             if msg:
                 fail(msg)
-            compare_bytes(name, data, pickle.dumps(make(), protocol=proto), pickled=True)
+            if numpy1_format.REFERENCE_ENVIRONMENT:
+                want = pickle.dumps(make(), protocol=proto)
+                compare_bytes(name, data, want, pickled=True)
+                if sha256(want) != digests.get(name):
+                    fail('%s: pickle.dumps no longer matches %s (rerun: check_io_written.py digests)'
+                         % (name, DIGESTS))
+            elif sha256(data) != digests.get(name):
+                fail('%s: %d bytes, SHA-256 %s, not the bytes CPython 3.11 + numpy 1.x write (%s)'
+                     % (name, len(data), sha256(data), digests.get(name)))
+
+
+def write_digests(path):
+    if not numpy1_format.REFERENCE_ENVIRONMENT:
+        sys.exit('check_io_written.py digests: run with CPython 3.11 and numpy 1.x (Debian 12)')
+    with open(path, 'w') as f:
+        f.write('# SHA-256 of pickle.dumps(<object>, protocol) under CPython 3.11 + numpy 1.x, for the\n'
+                '# byte checks of tests/io where another Python runs them (check_io_written.py digests).\n')
+        for base, make in PICKLE_OBJECTS:
+            for proto in (2, 3, 4):
+                f.write('%s_p%d.pkl %s\n' % (base, proto, sha256(pickle.dumps(make(), protocol=proto))))
 
 
 def check_sets(d):
@@ -112,7 +151,11 @@ def check_npz(d):
 
 
 def main():
-    mode, d = sys.argv[1], sys.argv[2]
+    mode = sys.argv[1]
+    if mode == 'digests':
+        write_digests(DIGESTS)
+        return
+    d = sys.argv[2]
     {'npy': check_npy, 'objects': check_objects, 'pickle': check_pickle, 'sets': check_sets,
      'npz': check_npz}[mode](d)
     if failures:
