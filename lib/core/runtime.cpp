@@ -103,4 +103,23 @@ int set_threads(int threads) {
   return torch::get_num_threads();
 }
 
+int blas_threads() {
+  const auto get = find_symbol<int (*)()>("openblas_get_num_threads");
+  return get ? get() : 0;
+}
+
+void set_blas_threads(int threads) {
+  if (const auto set = find_symbol<void (*)(int)>("openblas_set_num_threads")) set(threads);
+}
+
+ScopedThreads::ScopedThreads(int threads) : torch_(torch::get_num_threads()), blas_(blas_threads()) {
+  torch::set_num_threads(threads);
+  set_blas_threads(threads);
+}
+
+ScopedThreads::~ScopedThreads() {
+  torch::set_num_threads(torch_);
+  if (blas_ > 0) set_blas_threads(blas_);
+}
+
 }  // namespace th::runtime

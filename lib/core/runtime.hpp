@@ -25,4 +25,23 @@ torch::Device select_device(const std::string& requested);
 // threads <= 0: one per core. Returns the number in effect.
 int set_threads(int threads);
 
+// OpenBLAS keeps a thread pool of its own beside LibTorch's (found at run time with dlsym, as
+// detect_blas does): its size, 0 when the loaded BLAS is not OpenBLAS.
+int blas_threads();
+// Sets OpenBLAS's thread count; nothing when the loaded BLAS is not OpenBLAS.
+void set_blas_threads(int threads);
+
+// LibTorch's and OpenBLAS's thread counts set to `threads` for the lifetime of the object and
+// restored after (code that brings its own parallelism, e.g. the synthetic generator's workers).
+class ScopedThreads {
+ public:
+  explicit ScopedThreads(int threads);
+  ~ScopedThreads();
+  ScopedThreads(const ScopedThreads&) = delete;
+  ScopedThreads& operator=(const ScopedThreads&) = delete;
+
+ private:
+  int torch_, blas_;
+};
+
 }  // namespace th::runtime

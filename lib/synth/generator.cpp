@@ -1,6 +1,5 @@
 #include "synth/generator.hpp"
 
-#include <dlfcn.h>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
@@ -18,6 +17,7 @@
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/progress.hpp"
+#include "core/runtime.hpp"
 #include "geometry/camera.hpp"
 #include "geometry/mesh.hpp"
 #include "io/npy.hpp"
@@ -61,34 +61,17 @@ void parallel_for(int64_t n, int threads, const std::function<void(int64_t)>& fn
   if (error) std::rethrow_exception(error);
 }
 
-// LibTorch's and OpenCV's own thread pools are set to one thread while the workers run (they
-// are the parallelism); restored afterwards.
+// LibTorch's, OpenBLAS's and OpenCV's own thread pools are set to one thread while the workers
+// run (they are the parallelism; OpenBLAS's threads would spin between the small matrix products
+// of LBS and take a third of the CPU); restored afterwards.
 class LibraryThreads {
  public:
-  explicit LibraryThreads(int n) : torch_(torch::get_num_threads()), cv_(cv::getNumThreads()) {
-    torch::set_num_threads(n);
-    cv::setNumThreads(n);
-    // OpenBLAS (found at run time, as lib/core/runtime does) keeps its own threads, which
-    // spin between the small matrix products of LBS and would take a third of the CPU.
-    using Get = int (*)();
-    using Set = void (*)(int);
-    get_blas_ = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
-    set_blas_ = reinterpret_cast<Set>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
-    if (get_blas_ && set_blas_) {
-      blas_ = get_blas_();
-      set_blas_(n);
-    }
-  }
-  ~LibraryThreads() {
-    torch::set_num_threads(torch_);
-    cv::setNumThreads(cv_);
-    if (get_blas_ && set_blas_) set_blas_(blas_);
-  }
+  explicit LibraryThreads(int n) : torch_and_blas_(n), cv_(cv::getNumThreads()) { cv::setNumThreads(n); }
+  ~LibraryThreads() { cv::setNumThreads(cv_); }
 
  private:
-  int torch_, cv_, blas_ = 0;
-  int (*get_blas_)() = nullptr;
-  void (*set_blas_)(int) = nullptr;
+  runtime::ScopedThreads torch_and_blas_;
+  int cv_;
 };
 
 void write_bytes(const fs::path& path, const std::vector<uchar>& bytes) {
