@@ -1,5 +1,4 @@
 // The pickle reader against pickles CPython + numpy + scipy wrote, and hand-assembled ones.
-#include <chrono>
 #include <cstring>
 
 #include "io_objects.hpp"
@@ -119,30 +118,20 @@ TEST_CASE(
   CHECK(model.as_dict().front().first.kind() == Value::Kind::Bytes);
 }
 
-TEST_CASE("reading a 6890x3x207 float64 array from a pickle costs about one memcpy") {
-  const std::string bytes = read_bytes(io_fixtures() / "posedirs_p4.pkl");
-  const auto seconds = [](auto&& f) {
-    double best = 1e9;
-    for (int run = 0; run < 3; ++run) {
-      const auto t0 = std::chrono::steady_clock::now();
-      f();
-      best = std::min(best,
-                      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
-    }
-    return best;
-  };
-  Value v;
-  const double parse = seconds([&] { v = io::parse_pickle(bytes, "posedirs_p4.pkl"); });
-  // The baseline allocates too: fresh pages cost as much as the copy itself.
-  const double memcpy = seconds([&] {
-    std::string copy(bytes);
-    REQUIRE(copy.size() == bytes.size());
-  });
+// How fast this is (about one memcpy) is measured by transhuman-bench-io, not asserted here.
+TEST_CASE("a 6890x3x207 float64 array from a pickle is read exactly, into storage of its own") {
+  std::string bytes = read_bytes(io_fixtures() / "posedirs_p4.pkl");
+  const Value v = io::parse_pickle(bytes, "posedirs_p4.pkl");
   const torch::Tensor posedirs = v["posedirs"].as_tensor();
   CHECK(posedirs.sizes() == torch::IntArrayRef({6890, 3, 207}));
+  CHECK(posedirs.is_contiguous());
+  CHECK(posedirs.storage().nbytes() == size_t(6890) * 3 * 207 * sizeof(double));
   CHECK(torch::equal(posedirs, posedirs_formula(207)));
-  INFO("parse " << parse * 1e3 << " ms, memcpy " << memcpy * 1e3 << " ms");
-  CHECK(parse < 4 * memcpy + 0.02);
+  // The input buffer can go: the tensor does not point into it.
+  std::fill(bytes.begin(), bytes.end(), '\0');
+  bytes.clear();
+  bytes.shrink_to_fit();
+  CHECK(torch::equal(posedirs, posedirs_formula(207)));
 }
 
 TEST_CASE("parse_pickle follows the memo and the stack and frame and set and text opcodes") {
