@@ -18,23 +18,6 @@
 
 namespace {
 
-// This program's command line for the workers: the same, without --nproc, with the run directory
-// made explicit so every rank names the same one.
-std::vector<std::string> worker_args(int argc, char** argv, const std::string& out) {
-  std::vector<std::string> args{th::dist::self_executable()};
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--nproc") {
-      ++i;
-      continue;
-    }
-    if (a.rfind("--nproc=", 0) == 0) continue;
-    args.push_back(a);
-  }
-  if (!out.empty()) args.insert(args.begin() + 1, {"--out", out});
-  return args;
-}
-
 std::string app_name() {
   const char* rank = std::getenv("RANK");
   const char* world = std::getenv("WORLD_SIZE");
@@ -72,7 +55,7 @@ int main(int argc, char** argv) {
       th::dist::LaunchOptions launch;
       launch.nproc = nproc;
       launch.timeout_s = config.train.dist_timeout_s;
-      const int code = th::dist::launch_local(worker_args(argc, argv, options.out.empty() ? "runs/train" : ""), launch);
+      const int code = th::dist::launch_local(th::dist::worker_args(argc, argv, options.out.empty() ? "runs/train" : ""), launch);
       if (code != 0) std::cerr << "transhuman-train: error: a rank failed (see above)" << std::endl;
       return code;
     }

@@ -297,7 +297,7 @@ int main(int argc, char** argv) {
     net->eval();
     const auto cache = net->prepare(scene.in);
     torch::Tensor d;
-    const auto pts = body_points(scene, *cache.body, 20000, &d);
+    const auto pts = body_points(scene, *cache.geometry.body, 20000, &d);
     const auto raw = net->forward(cache, pts, d);
     net->heads->alpha_fc->bias.sub_(raw.select(1, 3).median());
   }
@@ -318,18 +318,22 @@ int main(int argc, char** argv) {
       cache_ng = net->prepare(scene.in);
     }
     const int64_t total = quick ? 16384 : 65536;
-    const auto pts = body_points(scene, *cache_ng.body, total, &dirs);
+    const auto pts = body_points(scene, *cache_ng.geometry.body, total, &dirs);
     const double min_time = quick ? 0.3 : 2.0;
     std::vector<std::string> stage_lines;
     // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded),
     // with gradient sinks for the gathered tables as the training path uses them.
+    // (Not the geometry, the token frames or the raw images: no gradient reaches them.)
     model::FrameCache cache_g = cache_ng;
-    for (auto& [k, v] : cache_g.tensors)
-      if (v.is_floating_point() && k.rfind("cam.", 0) != 0 && k.rfind("body.", 0) != 0 && k != "app.image_table" &&
-          k != "human.origins" && k != "human.rotations") {
-        v = v.detach().requires_grad_(true);
-        if (model::FrameCache::gathered(k)) cache_g.grad_sinks[k] = torch::zeros_like(v);
-      }
+    cache_g.visit([](torch::Tensor& t, torch::Tensor* sink) {
+      if (!t.defined() || !t.is_floating_point()) return;
+      t = t.detach().requires_grad_(true);
+      if (sink) *sink = torch::zeros_like(t);
+    });
+    cache_g.geometry = cache_ng.geometry;
+    cache_g.human.frames = cache_ng.human.frames;
+    cache_g.pixels.alpha.image_table = cache_ng.pixels.alpha.image_table;
+    cache_g.pixels.color.image_table = cache_ng.pixels.color.image_table;
     // Rounds over all chunk sizes; each cell keeps its best round (the machine is shared).
     struct Cell { double fwd = 0, dfirst = 0, fb = 0, train = 0, mem = 0; render::Profile profile; double fwd_s = 0; };
     std::map<int64_t, Cell> best;
@@ -365,9 +369,10 @@ int main(int argc, char** argv) {
       });
       // The training path: one field call for all points, chunked and recomputed inside.
       model::FrameCache cache_t = cache_g;
-      cache_t.grad_sinks.clear();
-      for (auto& [k, v] : cache_t.tensors)
-        if (v.requires_grad()) v = v.detach().requires_grad_(true);
+      cache_t.visit([](torch::Tensor& t, torch::Tensor* sink) {
+        if (sink) *sink = torch::Tensor();
+        if (t.defined() && t.requires_grad()) t = t.detach().requires_grad_(true);
+      });
       model::FrameField field(*net, cache_t, chunk, true);
       PeakMemory mem;
       int reps = 0;

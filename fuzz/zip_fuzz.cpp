@@ -17,7 +17,7 @@
 
 #include "core/error.hpp"
 #include "io/zip.hpp"
-#include "model/checkpoint_import.hpp"
+#include "pipeline/reference_import.hpp"
 #include "scratch.hpp"
 
 namespace {
@@ -47,7 +47,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   const std::string file = is_zip ? bytes : checkpoint_from_records(bytes);
   try {
-    th::model::read_torch_state_dict(
+    th::pipeline::read_torch_state_dict(
         th::fuzz::write_input(reinterpret_cast<const uint8_t*>(file.data()), file.size(), "in.pth"),
         "net");
   } catch (const th::Error&) {

@@ -6,7 +6,7 @@
 #include "core/error.hpp"
 #include "data/dataset.hpp"
 #include "model/transhuman.hpp"
-#include "train/trainer.hpp"
+#include "pipeline/checkpoint.hpp"
 
 namespace th::app {
 
@@ -40,7 +40,7 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
                m.dparf.coordinate, m.fdi.appearance, m.fdi.human, m.fdi.raw_rgb);
   model::TransHuman net(m, c.render.cull_distance);
   if (dry_run && !checkpoint.empty()) {
-    train::load_weights(*net, checkpoint, c.eval.model_mismatch == "warn");
+    pipeline::load_weights(*net, checkpoint, c.eval.model_mismatch == "warn");
     spdlog::info("checkpoint {} read and checked", checkpoint);
   }
   for (const auto& p : model::parameter_counts(*net))

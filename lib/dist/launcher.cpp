@@ -64,6 +64,21 @@ std::string self_executable() {
   return p.string();
 }
 
+std::vector<std::string> worker_args(int argc, const char* const* argv, const std::string& out) {
+  std::vector<std::string> args{self_executable()};
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--nproc") {
+      ++i;  // and its value
+      continue;
+    }
+    if (a.rfind("--nproc=", 0) == 0) continue;
+    args.push_back(a);
+  }
+  if (!out.empty()) args.insert(args.begin() + 1, {"--out", out});
+  return args;
+}
+
 int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
   if (args.empty()) fail("launch_local: no program");
   if (o.nproc < 1) fail("--nproc must be at least 1 (got ", o.nproc, ")");

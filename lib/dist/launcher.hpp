@@ -21,6 +21,11 @@ struct LaunchOptions {
 // killed); reports each failure on stderr. Throws th::Error when a worker cannot be started.
 int launch_local(const std::vector<std::string>& args, const LaunchOptions& options);
 
+// The workers' command line for `transhuman-train --nproc N ...` (argc/argv as main got them):
+// this executable with the same arguments, without --nproc N / --nproc=N, and with `--out OUT`
+// first when `out` is not empty (so that every rank names the same run directory).
+std::vector<std::string> worker_args(int argc, const char* const* argv, const std::string& out);
+
 // A TCP port on 127.0.0.1 that is free now (bound and released).
 int free_port();
 

@@ -12,10 +12,10 @@
 #include "core/progress.hpp"
 #include "data/dataset.hpp"
 #include "metrics/lpips.hpp"
-#include "train/images.hpp"
-#include "train/jsonl.hpp"
-#include "train/pipeline.hpp"
-#include "train/trainer.hpp"
+#include "pipeline/checkpoint.hpp"
+#include "pipeline/images.hpp"
+#include "pipeline/jsonl.hpp"
+#include "pipeline/pipeline.hpp"
 #include "video/frame_writer.hpp"
 
 namespace th::eval {
@@ -40,7 +40,7 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
           << r.points << ',' << r.culled_points << '\n';
   }
   {
-    train::JsonLine j;
+    pipeline::JsonLine j;
     j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
         .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
         .add("seconds_per_image", s.seconds_per_image);
@@ -71,12 +71,12 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   const auto smpl = data::load_body_model(config.data);
   auto dataset = std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
   model::TransHuman model(config.model, config.render.cull_distance);
-  train::load_weights(*model, checkpoint, config.eval.model_mismatch == "warn");
+  pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == "warn");
   model->to(device);
   model->eval();
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
   const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
-  train::Tokens tokens(config.model.grouping, smpl->v_template);
+  pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
 
   size_t n = dataset->size();
   if (config.eval.limit > 0) n = std::min(n, size_t(config.eval.limit));
@@ -92,8 +92,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   Progress progress("eval " + setting, int64_t(n), "img");
   for (size_t i = 0; i < n; ++i) {
     const data::Sample s = loader.next();
-    const auto inputs = train::frame_inputs(s, canonical, tokens.labels(s.body), device);
-    const auto r = train::evaluate_view(*model, config.render, s, inputs, lpips.get(), device);
+    const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
+    const auto r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device);
     summary.per_image.push_back({s.human, s.frame, s.target_view, r.psnr, r.ssim, r.lpips, r.seconds,
                                  r.stats.points, r.stats.culled_points});
     if (config.eval.save_images) {
@@ -103,9 +103,9 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
         imgs.push_back(video::to_bgr8(s.ref_images[v].permute({1, 2, 0})));
         captions.push_back("input view " + std::to_string(s.reference_views[size_t(v)]));
       }
-      imgs.push_back(train::error_map(r.pred, r.gt));
+      imgs.push_back(pipeline::error_map(r.pred, r.gt));
       captions.push_back("|error|");
-      video::write_png(image_dir / panel_file_name(s.human, s.frame, s.target_view), train::panel(imgs, captions));
+      video::write_png(image_dir / panel_file_name(s.human, s.frame, s.target_view), pipeline::panel(imgs, captions));
     }
     char note[64];
     std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", r.psnr, r.ssim);

@@ -38,8 +38,7 @@ resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest
   // surface: about two vertices per voxel of the box's surface area, two faces per vertex.
   const double area = 2 * (side[0] * side[1] + side[1] * side[2] + side[0] * side[2]);
   const double verts = 2 * area / (request.voxel * request.voxel);
-  double cache = 0;
-  for (const auto& [name, t] : prepared.cache.tensors) cache += double(t.nbytes());
+  const double cache = prepared.cache.nbytes();
   resources::Estimate e;
   e.what = fmt::format("mesh grid {:.0f} x {:.0f} x {:.0f} at {} mm", n[0], n[1], n[2], request.voxel * 1000);
   e.bytes = plane * 8 * 4 + slab * 48 + verts * (12 + 2 * 24) + cache +

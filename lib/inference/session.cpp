@@ -8,7 +8,7 @@
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "data/rays.hpp"
-#include "train/trainer.hpp"
+#include "pipeline/checkpoint.hpp"
 
 namespace th::inference {
 namespace fs = std::filesystem;
@@ -19,9 +19,9 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   dataset_ = std::make_shared<const data::Dataset>(config.data, config.eval.setting,
                                                    data::Dataset::Mode::Test, smpl);
   canonical_ = smpl->v_template;  // float64: token positions [parity]
-  tokens_ = std::make_unique<train::Tokens>(config.model.grouping, smpl->v_template);
+  tokens_ = std::make_unique<pipeline::Tokens>(config.model.grouping, smpl->v_template);
   model_ = model::TransHuman(config.model, config.render.cull_distance);
-  train::load_weights(*model_, checkpoint, config.eval.model_mismatch == "warn");
+  pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == "warn");
   model_->to(device);
   model_->eval();
 }
@@ -72,7 +72,7 @@ PreparedFrame Session::prepare(int human, int frame, int view) const {
   out.human = human;
   out.frame = frame;
   out.sample = dataset_->load_item({human, frame, view}, 0);
-  out.inputs = train::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
+  out.inputs = pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
   out.cache = model_->prepare(out.inputs);
   return out;
 }
@@ -115,8 +115,7 @@ torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamer
 
 resources::Estimate Session::render_estimate(const PreparedFrame& frame, int width, int height, int frames) const {
   const double pixels = double(width) * height;
-  double cache = 0;
-  for (const auto& [name, t] : frame.cache.tensors) cache += double(t.nbytes());
+  const double cache = frame.cache.nbytes();
   resources::Estimate e;
   e.what = fmt::format("render {} x {}{}", width, height, frames > 1 ? fmt::format(" x {} frames", frames) : "");
   // The image (float RGB, its 8-bit copies for the PNG), one band of rays (float64 origins and
@@ -135,7 +134,7 @@ torch::Tensor Session::density(const PreparedFrame& frame, const torch::Tensor& 
   const int64_t chunk = config_.render.chunk_points;
   for (int64_t b = 0; b < pts.size(0); b += chunk) {
     const auto p = pts.slice(0, b, std::min(pts.size(0), b + chunk)).to(device_, torch::kFloat32);
-    const auto kept = frame.cache.body->near(p).nonzero().flatten();
+    const auto kept = frame.cache.geometry.body->near(p).nonzero().flatten();
     if (kept.size(0) == 0) continue;
     const auto sigma = model_->density(frame.cache, p.index_select(0, kept));
     out.slice(0, b, b + p.size(0)).index_put_({kept.cpu()}, sigma.to(torch::kCPU, torch::kFloat32));

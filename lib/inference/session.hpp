@@ -17,7 +17,7 @@
 #include "model/frame_cache.hpp"
 #include "model/inputs.hpp"
 #include "model/transhuman.hpp"
-#include "train/pipeline.hpp"
+#include "pipeline/pipeline.hpp"
 #include "video/camera_path.hpp"
 
 namespace th::inference {
@@ -89,7 +89,7 @@ class Session {
   std::filesystem::path checkpoint_;
   std::shared_ptr<const data::Dataset> dataset_;
   torch::Tensor canonical_;
-  mutable std::unique_ptr<train::Tokens> tokens_;
+  mutable std::unique_ptr<pipeline::Tokens> tokens_;
   mutable model::TransHuman model_{nullptr};  // evaluation only: the weights never change
 };
 

@@ -156,23 +156,6 @@ torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a) {
   return torch::relu(fc_2(torch::relu(fc_1(o))));
 }
 
-FDIFolded FDIImpl::fold() const {
-  FDIFolded f;
-  const auto& W1 = fc_1->weight;
-  if (config.appearance) {
-    f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
-    f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
-  }
-  if (config.human) {
-    // fc_1's bias joins the query side (the attention weights multiply the value side).
-    const auto wv = torch::mm(W1, value1->weight);
-    const auto bv = torch::mv(W1, value1->bias) + fc_1->bias;
-    f.w1 = config.appearance ? torch::cat({key1->weight, wv}, 0) : wv;
-    f.b1 = config.appearance ? torch::cat({key1->bias, bv}, 0) : bv;
-  }
-  return f;
-}
-
 torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a) {
   torch::Tensor pre;
   if (config.appearance && config.human) {

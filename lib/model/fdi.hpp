@@ -26,8 +26,7 @@ class FDIImpl : public torch::nn::Module {
   // -> e: (N, V, 256).
   torch::Tensor forward(const torch::Tensor& s, const torch::Tensor& a);
 
-  // The same from folded weights (fewer matrix products).
-  FDIFolded fold() const;
+  // The same from folded weights (fewer matrix products; model/shortcuts.hpp folds them).
   torch::Tensor forward_folded(const FDIFolded& folded, const torch::Tensor& s, const torch::Tensor& a);
 
   // softmax over the key views j of q_v . k_j / sqrt(d): q (N, V, d), k (N, V, d) -> (N, V, V)

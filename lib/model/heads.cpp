@@ -33,18 +33,6 @@ torch::Tensor HeadsImpl::color(const torch::Tensor& e, const torch::Tensor& p,
   return rgb_fc(torch::relu(fc_4(c.mean(1))));
 }
 
-HeadsFolded HeadsImpl::fold() const {
-  HeadsFolded f;
-  const auto wc = view_fc->weight.narrow(1, 0, 256);
-  f.e_weight = torch::mm(wc, feature_fc->weight);
-  f.e_bias = torch::mv(wc, feature_fc->bias) + view_fc->bias;
-  if (appearance_) {
-    f.readout_weight = torch::cat({torch::mm(wc, rgb_res_0->weight), rgb_res_1->weight}, 0);
-    f.readout_bias = torch::cat({torch::mv(wc, rgb_res_0->bias), rgb_res_1->bias}, 0);
-  }
-  return f;
-}
-
 torch::Tensor HeadsImpl::color_folded(const HeadsFolded& f, const torch::Tensor& e,
                                       const torch::Tensor& readout, const torch::Tensor& dir_code) {
   const auto wd = view_fc->weight.narrow(1, 256, kDirectionEncodingDim);

@@ -27,14 +27,15 @@ class HeadsImpl : public torch::nn::Module {
   // gamma(d) -> raw rgb (N, 3).
   torch::Tensor color(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code);
 
-  HeadsFolded fold() const;
-  // readout: (N, V, 256) = the folded readout of p_v (undefined w/o appearance).
+  // The same from folded weights (model/shortcuts.hpp folds them). readout: (N, V, 256) = the
+  // folded readout of p_v (undefined w/o appearance).
   torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e,
                              const torch::Tensor& readout, const torch::Tensor& dir_code);
 
   torch::nn::Linear fc_3{nullptr}, alpha_fc{nullptr};
   torch::nn::Linear feature_fc{nullptr}, view_fc{nullptr}, fc_4{nullptr}, rgb_fc{nullptr};
   torch::nn::Linear rgb_res_0{nullptr}, rgb_res_1{nullptr};
+  bool appearance() const { return appearance_; }
 
  private:
   bool appearance_;

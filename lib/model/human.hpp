@@ -18,30 +18,19 @@ namespace th::model {
 
 class HumanRepresentation : public torch::nn::Module {
  public:
-  // painted: (V, Nv, 192) painted body (SPEC 3.1); xs_vertices: (Nv, 3) posed vertices in
-  // the SMPL frame. Stores the per-frame tensors in cache.tensors under "human.*".
-  virtual void prepare(const FrameInputs& in, const torch::Tensor& painted,
-                       const torch::Tensor& xs_vertices, FrameCache& cache) = 0;
-  // xs: (N, 3) points in the SMPL frame -> s: (N, V, 256).
-  virtual torch::Tensor forward(const FrameCache& cache, const torch::Tensor& xs) = 0;
+  // The per-frame part: the painted body -> the human stage of the frame state.
+  virtual void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) = 0;
+  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256).
+  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) = 0;
 };
 
-// TransHE + DPaRF + fc_0 (reference names: ViT.*, fc_0.*).
+// TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*).
 class TokenFieldsImpl : public HumanRepresentation {
  public:
   explicit TokenFieldsImpl(const ModelConfig& config);
 
-  void prepare(const FrameInputs& in, const torch::Tensor& painted, const torch::Tensor& xs_vertices,
-               FrameCache& cache) override;
-  torch::Tensor forward(const FrameCache& cache, const torch::Tensor& xs) override;
-
-  // The tokens T_v after the transformer: (V, Nt, 192), and the token positions fed to the PE
-  // (normalised, (Nt, 3)), for one frame. Empty clusters are dropped.
-  struct Tokens {
-    torch::Tensor features, positions, keep;
-    TokenFrames frames;
-  };
-  Tokens tokens(const FrameInputs& in, const torch::Tensor& painted, const torch::Tensor& xs_vertices);
+  void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
 
   TransHE vit{nullptr};
   torch::nn::Linear fc_0{nullptr};

@@ -12,8 +12,9 @@ SPCTrilinearImpl::SPCTrilinearImpl(const ModelConfig& config) : config_(config.s
   fc_0 = register_module("fc_0", torch::nn::Linear(C, 256));
 }
 
-void SPCTrilinearImpl::prepare(const FrameInputs& in, const torch::Tensor& painted,
-                               const torch::Tensor& xs_vertices, FrameCache& cache) {
+void SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBody& body, HumanStage& stage) {
+  const auto& painted = body.features;
+  const auto& xs_vertices = body.xs_vertices;
   const double voxel = config_.voxel_size;
   torch::Tensor lo, dims;
   {
@@ -36,16 +37,16 @@ void SPCTrilinearImpl::prepare(const FrameInputs& in, const torch::Tensor& paint
   auto grid = (sums / counts.clamp_min(1).view({1, -1, 1}))
                   .permute({0, 2, 1})
                   .reshape({V, C, nz, ny, nx});
-  cache.tensors["human.grid"] = conv->forward(grid);
-  cache.tensors["human.lo"] = lo;
-  cache.tensors["human.extent"] = (dims - 1).to(lo.dtype()) * voxel;
+  stage.grid = conv->forward(grid);
+  stage.lo = lo;
+  stage.extent = (dims - 1).to(lo.dtype()) * voxel;
 }
 
-torch::Tensor SPCTrilinearImpl::forward(const FrameCache& cache, const torch::Tensor& xs) {
-  const auto& grid = cache.at("human.grid");
+torch::Tensor SPCTrilinearImpl::forward(const HumanStage& stage, const torch::Tensor& xs) {
+  const auto& grid = stage.grid;
   const auto V = grid.size(0), n = xs.size(0);
   // (x, y, z) -> [-1, 1] over the voxel centres (align_corners); outside the grid reads 0.
-  const auto g = ((xs - cache.at("human.lo")) / cache.at("human.extent")) * 2 - 1;
+  const auto g = ((xs - stage.lo) / stage.extent) * 2 - 1;
   const auto coords = g.view({1, 1, 1, n, 3}).expand({V, 1, 1, n, 3});
   const auto f = F::grid_sample(grid, coords,
                                 F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kZeros).align_corners(true));

@@ -13,9 +13,8 @@ class SPCTrilinearImpl : public HumanRepresentation {
  public:
   explicit SPCTrilinearImpl(const ModelConfig& config);
 
-  void prepare(const FrameInputs& in, const torch::Tensor& painted, const torch::Tensor& xs_vertices,
-               FrameCache& cache) override;
-  torch::Tensor forward(const FrameCache& cache, const torch::Tensor& xs) override;
+  void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
 
   torch::nn::Linear embed{nullptr}, fc_0{nullptr};
   torch::nn::Sequential conv{nullptr};

@@ -118,4 +118,26 @@ torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Ten
   return norm(x);
 }
 
+FrameTokens build_tokens(TransHEImpl* vit, const ModelConfig& config, const FrameInputs& in,
+                         const PaintedBody& body) {
+  const auto& painted = body.features;
+  const auto device = painted.device();
+  const auto labels = in.labels.to(device);
+  const int64_t nt = in.num_tokens > 0 ? in.num_tokens : labels.max().item<int64_t>() + 1;
+  FrameTokens t;
+  t.keep = cluster_counts(labels, nt).nonzero().flatten();
+  const auto weights = config.grouping.mean_over == "visible" ? in.visibility.to(device) : torch::Tensor();
+  auto feats = cluster_mean(painted, labels, nt, weights).index_select(1, t.keep);
+  // SPEC 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
+  // for the observation-space ablation, from the posed body in the SMPL frame.
+  const auto& source = config.transhe.position == "canonical" ? in.canonical : body.xs_vertices;
+  const auto means = cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);
+  t.positions = normalize_token_positions(means, config.transhe.pe_scale, painted);
+  t.features = vit ? vit->forward(feats, t.positions) : feats;
+  const auto& xs = body.xs_vertices;
+  auto frames = token_frames(xs, in.A.to(device, xs.scalar_type()), labels, nt);
+  t.frames = {frames.origins.index_select(0, t.keep), frames.rotations.index_select(0, t.keep)};
+  return t;
+}
+
 }  // namespace th::model

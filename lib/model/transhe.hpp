@@ -6,6 +6,9 @@
 #include <torch/torch.h>
 
 #include "core/config.hpp"
+#include "model/dparf.hpp"
+#include "model/frame_cache.hpp"
+#include "model/inputs.hpp"
 
 namespace th::model {
 
@@ -67,6 +70,20 @@ class TransHEImpl : public torch::nn::Module {
   TransHEConfig config;
 };
 TORCH_MODULE(TransHE);
+
+// The tokens of one frame: the painted body averaged per token (cluster), the token positions
+// (canonical cluster means, float64 [parity], or the posed body's for the observation-space
+// ablation) normalised for the PE, TransHE over each view's tokens (`vit` null: the "w/o
+// TransHE" ablation keeps the means), and each token's DPaRF frame (SPEC 3.3). Clusters
+// without vertices (possible with grid groupings) have no token.
+struct FrameTokens {
+  torch::Tensor features;   // T_v after the transformer: (V, Nt, C)
+  torch::Tensor positions;  // (Nt, 3) normalised positions fed to the PE
+  torch::Tensor keep;       // (Nt) int64: the clusters that have a token
+  TokenFrames frames;
+};
+FrameTokens build_tokens(TransHEImpl* vit, const ModelConfig& config, const FrameInputs& in,
+                         const PaintedBody& body);
 
 // timm's trunc_normal_(std, a=-2, b=2) by the inverse-CDF method.
 void trunc_normal_(torch::Tensor& t, double std, double a = -2.0, double b = 2.0);

@@ -6,8 +6,9 @@
 #include <algorithm>
 
 #include "core/error.hpp"
-#include "model/checkpoint_import.hpp"
+#include "model/pretrained.hpp"
 #include "model/positional_encoding.hpp"
+#include "model/shortcuts.hpp"
 #include "render/body_distance.hpp"
 
 namespace th::model {
@@ -40,140 +41,111 @@ TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
 FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   in.check();
   FrameCache cache;
-  auto& t = cache.tensors;
   const auto opts = in.ref_images.options();
-  t["cam.K"] = in.K.to(opts);
-  t["cam.R"] = in.R.to(opts);
-  t["cam.T"] = in.T.to(opts).reshape({-1, 3, 1});
-  t["body.Rh"] = in.Rh.to(opts);
-  t["body.Th"] = in.Th.to(opts).reshape({3});
-  cache.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance_);
+  auto& geo = cache.geometry;
+  geo.K = in.K.to(opts);
+  geo.R = in.R.to(opts);
+  geo.T = in.T.to(opts).reshape({-1, 3, 1});
+  geo.Rh = in.Rh.to(opts);
+  geo.Th = in.Th.to(opts).reshape({3});
+  geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance_);
 
+  // Encoder (SPEC 3.1).
   EncodedViews enc;
   {
     ScopedTimer timer(profile_, "encoder");
     enc = encoder->forward(in.ref_images);
   }
-  cache.geometry = enc.geometry;
+  cache.pixels.geometry = enc.geometry;
+  if (config_.exact_shortcuts) cache.folded = fold_weights(*fdi, *heads);
+
+  // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.2, 3.3).
   if (human) {
+    PaintedBody body;
     const auto vertices = in.vertices.to(opts);
-    torch::Tensor painted;
     {
       ScopedTimer timer(profile_, "painting");
-      const auto uv = project_points(vertices, t["cam.K"], t["cam.R"], t["cam.T"]);
-      painted = config_.encoder.fast_sampling
-                    ? encoder->paint(enc, uv, in.visibility)
-                    : encoder->paint_direct(enc, uv, in.visibility);
+      const auto uv = project_points(vertices, geo.K, geo.R, geo.T);
+      body.features = config_.encoder.fast_sampling ? encoder->paint(enc, uv, in.visibility)
+                                                    : encoder->paint_direct(enc, uv, in.visibility);
     }
     ScopedTimer timer(profile_, "transhe");
-    const auto xs_vertices = torch::mm(vertices - t["body.Th"], t["body.Rh"]);
-    human->prepare(in, painted, xs_vertices, cache);
+    body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);
+    human->prepare(in, body, cache.human);
   }
+
+  // What per-point sampling reads of the encoder output (the appearance branch of FDI and the
+  // colour head), in the form the config asks for.
   ScopedTimer timer(profile_, "readouts");
   if (config_.fdi.appearance) {
+    auto& px = cache.pixels;
     if (config_.exact_shortcuts) {
-      // SPEC 9: the per-pixel layers after p_v, applied once per frame on each level.
-      const auto hf = heads->fold();
-      const auto alpha = encoder->make_readout(enc, fdi->alpha_res_0->weight, fdi->alpha_res_0->bias);
-      const auto color = encoder->make_readout(enc, hf.readout_weight, hf.readout_bias);
-      t["app.image_table"] = alpha.image_table;
-      for (const auto& [name, r] : {std::pair{"alpha", alpha}, std::pair{"color", color}}) {
-        t[std::string("app.") + name + ".table"] = r.table;
-        t[std::string("app.") + name + ".bias"] = r.bias;
-        if (r.image_weight.defined()) t[std::string("app.") + name + ".image_weight"] = r.image_weight;
-      }
+      make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px);  // SPEC 9
     } else if (config_.encoder.fast_sampling) {
-      for (size_t l = 0; l < enc.levels.size(); ++l) t["enc.level" + std::to_string(l)] = enc.levels[l];
-      t["enc.images"] = enc.images;
+      px.levels = enc.levels;
+      px.images = enc.images;
     } else {
-      t["enc.pixel"] = encoder->pixel_features(enc);  // (V, Cpix, H, W), the reference's tensor
+      px.pixel = encoder->pixel_features(enc);  // (V, Cpix, H, W), the reference's tensor
     }
-  }
-  if (config_.exact_shortcuts) {
-    const auto ff = fdi->fold();
-    const auto hf = heads->fold();
-    for (const auto& [name, v] : {std::pair{"fold.w0", ff.w0}, std::pair{"fold.b0", ff.b0},
-                                  std::pair{"fold.w1", ff.w1}, std::pair{"fold.b1", ff.b1},
-                                  std::pair{"fold.e_weight", hf.e_weight}, std::pair{"fold.e_bias", hf.e_bias}})
-      if (v.defined()) t[name] = v;
   }
   return cache;
 }
 
-torch::Tensor TransHumanImpl::sample_pixels(const FrameCache& cache, const torch::Tensor& uv,
-                                            const std::string& readout) {
+torch::Tensor TransHumanImpl::pixel_features_at(const PixelStage& px, const torch::Tensor& uv) {
+  ScopedTimer timer(profile_, "sampling");
+  if (px.pixel.defined()) return grid_sample_pixels(px.pixel, uv);
+  const auto n = uv.size(0), V = uv.size(1);
+  const auto flat = uv.reshape({-1, 2});
+  const auto view = view_ids(n, V, uv.device());
+  EncodedViews enc;
+  enc.levels = px.levels;
+  enc.images = px.images;
+  enc.geometry = px.geometry;
+  return encoder
+      ->sample_pixel_features(enc, px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
+      .view({n, V, -1});
+}
+
+torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadout& readout, const torch::Tensor& uv) {
   ScopedTimer timer(profile_, "sampling");
   const auto n = uv.size(0), V = uv.size(1);
   const auto flat = uv.reshape({-1, 2});
-  if (config_.exact_shortcuts) {
-    const auto view = view_ids(n, V, uv.device());
-    const auto& g = cache.geometry;
-    PixelReadout r;
-    r.table = cache.at("app." + readout + ".table");
-    r.bias = cache.at("app." + readout + ".bias");
-    r.table_grad_sink = cache.sink("app." + readout + ".table");
-    r.image_table = cache.at("app.image_table");
-    if (cache.has("app." + readout + ".image_weight")) r.image_weight = cache.at("app." + readout + ".image_weight");
-    return r.sample(g.stacked_level_taps(flat, view), g.image_taps(flat, view)).view({n, V, -1});
-  }
-  // Reference path: p_v itself (readout "p"), then the layers act on it.
-  torch::Tensor p;
-  if (config_.encoder.fast_sampling) {
-    EncodedViews enc;
-    for (size_t l = 0; l < cache.geometry.level_sizes.size(); ++l)
-      enc.levels.push_back(cache.at("enc.level" + std::to_string(l)));
-    enc.images = cache.at("enc.images");
-    enc.geometry = cache.geometry;
-    const auto view = view_ids(n, V, uv.device());
-    p = encoder->sample_pixel_features(enc, cache.geometry.stacked_level_taps(flat, view),
-                                       cache.geometry.image_taps(flat, view));
-    p = p.view({n, V, -1});
-  } else {
-    p = grid_sample_pixels(cache.at("enc.pixel"), uv);
-  }
-  if (readout == "alpha") return fdi->alpha_res_0(p);
-  return p;
+  const auto view = view_ids(n, V, uv.device());
+  return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view)).view({n, V, -1});
 }
 
 TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
+  const auto& geo = cache.geometry;
   Trunk out;
-  torch::Tensor s, a;
+  torch::Tensor s, a;  // FDI's inputs: human representation s_v, appearance a_v (N, V, 256)
   if (human) {
     ScopedTimer timer(profile_, "dparf");
-    const auto xs = torch::mm(pts - cache.at("body.Th"), cache.at("body.Rh"));
-    s = human->forward(cache, xs);
+    const auto xs = torch::mm(pts - geo.Th, geo.Rh);
+    s = human->forward(cache.human, xs);
   }
   {
     ScopedTimer timer(profile_, "sampling");
-    out.uv = project_points(pts, cache.at("cam.K"), cache.at("cam.R"), cache.at("cam.T"))
-                 .permute({1, 0, 2})
-                 .contiguous();
+    out.uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
   }
-  if (config_.fdi.appearance) a = sample_pixels(cache, out.uv, "alpha").relu_();
+  if (config_.fdi.appearance) {
+    a = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.alpha, out.uv)
+                                : fdi->alpha_res_0(pixel_features_at(cache.pixels, out.uv));
+    a.relu_();
+  }
   ScopedTimer timer(profile_, "fdi");
-  if (config_.exact_shortcuts) {
-    FDIFolded f;
-    if (cache.has("fold.w0")) f.w0 = cache.at("fold.w0"), f.b0 = cache.at("fold.b0");
-    if (cache.has("fold.w1")) f.w1 = cache.at("fold.w1"), f.b1 = cache.at("fold.b1");
-    out.e = fdi->forward_folded(f, s, a);
-  } else {
-    out.e = fdi->forward(s, a);
-  }
+  out.e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, s, a) : fdi->forward(s, a);
   return out;
 }
 
 torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs) {
-  torch::Tensor pix;
-  if (config_.fdi.appearance) pix = sample_pixels(cache, t.uv, config_.exact_shortcuts ? "color" : "p");
+  torch::Tensor pix;  // p_v, or its folded readout (exact shortcuts)
+  if (config_.fdi.appearance)
+    pix = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.color, t.uv)
+                                  : pixel_features_at(cache.pixels, t.uv);
   ScopedTimer timer(profile_, "heads");
   const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
-  if (config_.exact_shortcuts) {
-    HeadsFolded f;
-    f.e_weight = cache.at("fold.e_weight");
-    f.e_bias = cache.at("fold.e_bias");
-    return heads->color_folded(f, t.e, pix, code);
-  }
+  if (config_.exact_shortcuts) return heads->color_folded(cache.folded.heads, t.e, pix, code);
   return heads->color(t.e, pix, code);
 }
 
@@ -220,7 +192,6 @@ namespace {
 struct ChunkJob : torch::CustomClassHolder {
   TransHumanImpl* model = nullptr;
   FrameCache cache;
-  std::vector<std::string> names;  // cache tensors that receive gradients
   int64_t chunk = 0;
 };
 
@@ -257,16 +228,18 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     const auto saved = ctx->get_saved_variables();
     const auto &pts = saved[0], &dirs = saved[1];
     torch::AutoGradMode enable(true);
+    // The frame's tensors that carry a gradient become leaves of this recomputation (the same
+    // tensors, in the same order, as the inputs of forward); tables read by weighted_gather get
+    // a gradient sink on CPU.
     FrameCache cache = job->cache;
     std::vector<torch::Tensor> leaves, sinks;
-    for (const auto& name : job->names) {
-      auto leaf = cache.tensors.at(name).detach().requires_grad_(true);
-      cache.tensors[name] = leaf;
-      leaves.push_back(leaf);
+    cache.visit([&](torch::Tensor& t, torch::Tensor* sink) {
+      if (!t.defined() || !t.requires_grad()) return;
+      t = t.detach().requires_grad_(true);
+      leaves.push_back(t);
       sinks.emplace_back();
-      if (FrameCache::gathered(name) && leaf.device().is_cpu())
-        sinks.back() = cache.grad_sinks[name] = torch::zeros_like(leaf);
-    }
+      if (sink && t.device().is_cpu()) sinks.back() = *sink = torch::zeros_like(t);
+    });
     const auto& g = grad_out[0];
     const int64_t n = pts.size(0);
     for (int64_t b = 0; b < n; b += job->chunk) {
@@ -299,11 +272,9 @@ torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dir
   job->cache = cache_;
   job->chunk = chunk_;
   std::vector<torch::Tensor> frame;
-  for (const auto& [name, tensor] : cache_.tensors)
-    if (tensor.requires_grad()) {
-      job->names.push_back(name);
-      frame.push_back(tensor);
-    }
+  job->cache.visit([&](torch::Tensor& t, torch::Tensor*) {
+    if (t.defined() && t.requires_grad()) frame.push_back(t);
+  });
   return CheckpointedChunks::apply(torch::TensorList(frame), pts, dirs, job);
 }
 
@@ -316,14 +287,15 @@ render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCach
                                           const render::Rays& rays, const RenderConfig& config,
                                           bool skip_far_points, render::Profile* profile) {
   FrameField field(model, cache, config.train_chunk_points, true);
-  return render::VolumeRenderer(config, profile).render(field, rays, true, skip_far_points ? cache.body.get() : nullptr);
+  return render::VolumeRenderer(config, profile)
+      .render(field, rays, true, skip_far_points ? cache.geometry.body.get() : nullptr);
 }
 
 render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
                                  const RenderConfig& config, render::Profile* profile) {
   torch::NoGradGuard no_grad;
   FrameField field(model, cache, config.chunk_points, false);
-  if (config.progressive) return render::render_progressive(field, *cache.body, rays, config, profile);
+  if (config.progressive) return render::render_progressive(field, *cache.geometry.body, rays, config, profile);
   return render::VolumeRenderer(config, profile).render(field, rays, false);
 }
 

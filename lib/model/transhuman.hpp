@@ -25,9 +25,9 @@ class TransHumanImpl : public torch::nn::Module {
  public:
   explicit TransHumanImpl(const ModelConfig& config, double cull_distance = 0.1);
 
-  // Per-frame precomputation: encoder, painting, tokens, ViT, token frames, fc_0 on tokens,
-  // readouts of the pixel features and folded weights, and the body-distance structure.
-  // Under autograd the cached tensors keep their history (training).
+  // The per-frame stages (model/frame_cache.hpp), in order: frame geometry and the body-distance
+  // structure, encoder, folded weights (exact shortcuts), painting and the human
+  // representation, the pixel stage. Under autograd the tensors keep their history (training).
   FrameCache prepare(const FrameInputs& in);
 
   // pts: (N, 3) world, dirs: (N, 3) ray directions (any length) -> raw (N, 4): rgb logits,
@@ -57,7 +57,11 @@ class TransHumanImpl : public torch::nn::Module {
   };
   Trunk trunk(const FrameCache& cache, const torch::Tensor& pts);
   torch::Tensor color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs);
-  torch::Tensor sample_pixels(const FrameCache& cache, const torch::Tensor& uv, const std::string& readout);
+  // p_v at projections uv (N, V, 2) -> (N, V, Cpix), from the pixel stage's reference or
+  // fast-sampling form.
+  torch::Tensor pixel_features_at(const PixelStage& pixels, const torch::Tensor& uv);
+  // A per-level readout (exact shortcuts) at uv -> (N, V, Cout).
+  torch::Tensor readout_at(const PixelStage& pixels, const PixelReadout& readout, const torch::Tensor& uv);
 
   ModelConfig config_;
   double cull_distance_;

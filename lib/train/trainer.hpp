@@ -1,7 +1,8 @@
 #pragma once
-// transhuman-train's loop (SPEC 5): patches of a random target view, MSE + 0.1 LPIPS, Adam with
-// element-wise clipping, warm-up + cosine per epoch, atomic checkpoints, exact resume,
-// periodic validation renders, NaN and collapse detection, JSON-lines metrics.
+// transhuman-train's loop (SPEC 5): patches of a random target view, MSE + 0.1 LPIPS (loss.hpp),
+// Adam with element-wise clipping, warm-up + cosine per epoch (schedule.hpp), atomic checkpoints
+// and exact resume (pipeline/checkpoint.hpp), periodic validation renders, NaN and collapse
+// detection, JSON-lines metrics; data-parallel across processes (step.hpp, lib/dist).
 
 #include <torch/types.h>
 
@@ -11,7 +12,6 @@
 #include <string>
 
 #include "core/config.hpp"
-#include "model/transhuman.hpp"
 
 namespace th::dist {
 class Communicator;
@@ -44,19 +44,5 @@ struct TrainSummary {
 // Trains with `config` on `device`. Throws th::Error for bad input (missing data, NaN loss with
 // the step and the last good checkpoint named).
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options);
-
-// Loads the weights of a checkpoint into `model`: ours (.pt, written by train) or the reference
-// implementation's (.pth, SPEC 8). Every tensor is checked (model/checked_load.hpp); a checkpoint
-// trained with other model.* values is refused naming them, or with `allow_model_mismatch`
-// (eval.model_mismatch: warn) loaded with a warning. Throws th::Error naming the file.
-void load_weights(model::TransHumanImpl& model, const std::filesystem::path& checkpoint,
-                  bool allow_model_mismatch = false);
-
-// Our checkpoint: model weights, optimiser state and the position of the run.
-struct CheckpointState {
-  int epoch = 0;          // epoch to continue with
-  int64_t step = 0;       // global steps done
-  int iteration = 0;      // iterations done within `epoch`
-};
 
 }  // namespace th::train

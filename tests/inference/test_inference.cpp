@@ -13,7 +13,9 @@
 #include "inference/mesh_extraction.hpp"
 #include "mesh/ply.hpp"
 #include "support/test_env.hpp"
-#include "train/pipeline.hpp"
+#include "pipeline/pipeline.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "train/trainer.hpp"
 #include "video/camera_path.hpp"
 
@@ -65,15 +67,15 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
 
   // transhuman-eval's path: the same sample through evaluate_view.
   th::model::TransHuman model(config.model, config.render.cull_distance);
-  th::train::load_weights(*model, tiny_checkpoint());
+  th::pipeline::load_weights(*model, tiny_checkpoint());
   model->eval();
   const auto smpl = th::data::load_body_model(config.data);
-  th::train::Tokens tokens(config.model.grouping, smpl->v_template);
-  const auto inputs = th::train::frame_inputs(s, smpl->v_template,
+  th::pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
+  const auto inputs = th::pipeline::frame_inputs(s, smpl->v_template,
                                               tokens.labels(s.body), torch::kCPU);
   // Token positions come from v_template in float64, as the reference's do (SPEC 3.2 [parity]).
   CHECK(prepared.inputs.canonical.scalar_type() == torch::kDouble);
-  const auto expected = th::train::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
+  const auto expected = th::pipeline::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
   CHECK(torch::equal(image, expected.pred));
   CHECK(image.max().item<float>() > 0);  // not an all-black comparison
 

@@ -7,12 +7,15 @@
 
 #include "core/error.hpp"
 #include "io/npy.hpp"
-#include "model/checkpoint_import.hpp"
+#include "model/pretrained.hpp"
+#include "pipeline/checkpoint.hpp"
+#include "pipeline/reference_import.hpp"
 #include "model/frame_fixture.hpp"
 #include "model/transhuman.hpp"
 
 using namespace th;
 using namespace th::model;
+using namespace th::pipeline;
 
 namespace {
 

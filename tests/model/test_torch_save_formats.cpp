@@ -10,11 +10,12 @@
 
 #include "core/error.hpp"
 #include "io/bytes.hpp"
-#include "model/checkpoint_import.hpp"
+#include "pipeline/reference_import.hpp"
 #include "support/test_env.hpp"
 
 using namespace th;
 using namespace th::model;
+using namespace th::pipeline;
 
 namespace {
 

@@ -10,10 +10,11 @@
 #include "core/error.hpp"
 #include "io/bytes.hpp"
 #include "io/zip.hpp"
-#include "model/checked_load.hpp"
+#include "pipeline/checked_load.hpp"
 #include "model/transhuman.hpp"
 #include "support/test_env.hpp"
 #include "support/tiny_config.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -36,7 +37,7 @@ void save_model_only(th::model::TransHumanImpl& model, const fs::path& file, boo
   torch::serialize::OutputArchive root, m;
   model.save(m);
   root.write("model", m);
-  if (with_config) th::model::write_model_config(root, model.config());
+  if (with_config) th::pipeline::write_model_config(root, model.config());
   root.save_to(file.string());
 }
 
@@ -68,7 +69,7 @@ TEST_CASE("a checkpoint's weights load back exactly through the checked reader",
   save_model_only(*a, dir / "a.pt", true);
   torch::manual_seed(99);
   th::model::TransHuman b(c.model, c.render.cull_distance);
-  th::train::load_weights(*b, dir / "a.pt");
+  th::pipeline::load_weights(*b, dir / "a.pt");
   const auto pa = a->named_parameters(), pb = b->named_parameters();
   for (const auto& p : pa) CHECK(torch::equal(p.value(), pb[p.key()]));
 }
@@ -90,7 +91,7 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
   });
   INFO("truncated " << cut);
   auto other = make_model(c);
-  const std::string message = error_of([&] { th::train::load_weights(*other, file); });
+  const std::string message = error_of([&] { th::pipeline::load_weights(*other, file); });
   CHECK_THAT(message, Catch::Contains(file.string()));
   CHECK_THAT(message, Catch::Contains("storage") || Catch::Contains("cannot be read"));
 }
@@ -105,7 +106,7 @@ TEST_CASE("non-finite weights are refused naming the tensor and the index", "[tr
   const fs::path dir = th::test::scratch_dir("ckcheck_nan"), file = dir / "nan.pt";
   save_model_only(*model, file, true);
   auto other = make_model(c);
-  const std::string message = error_of([&] { th::train::load_weights(*other, file); });
+  const std::string message = error_of([&] { th::pipeline::load_weights(*other, file); });
   CHECK_THAT(message, Catch::Contains("heads.alpha_fc.weight") && Catch::Contains("NaN") &&
                           Catch::Contains("[0, 5]") && Catch::Contains(file.string()));
 }
@@ -133,23 +134,23 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
     th::io::detail::write_file_atomic(file, zip);
   };
   write("archive/data/0", 100);
-  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+  CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("packed.pt/archive/data/0") && Catch::Contains("compressed storage record"));
   auto model = make_model(tiny_config());
-  CHECK_THAT(error_of([&] { th::train::load_weights(*model, file); }), Catch::Contains("compressed storage record"));
+  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*model, file); }), Catch::Contains("compressed storage record"));
   write("archive/data.pkl", 0x7fffffff);
-  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+  CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("archive/data.pkl") && Catch::Contains("claiming 2147483647 bytes"));
   write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
-  CHECK_NOTHROW(th::model::check_checkpoint_archive(file));
+  CHECK_NOTHROW(th::pipeline::check_checkpoint_archive(file));
   // LibTorch's reader is not opened on a zip that is not a checkpoint.
   th::io::detail::write_file_atomic(file, th::io::detail::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
-  CHECK_THAT(error_of([&] { th::model::check_checkpoint_archive(file); }),
+  CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("not a PyTorch checkpoint (no <archive>/version record)"));
 }
 
 TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]") {
-  using th::model::check_view;
+  using th::pipeline::check_view;
   CHECK_NOTHROW(check_view({2, 3}, {3, 1}, 0, 6, "v"));
   CHECK_NOTHROW(check_view({3, 2}, {1, 3}, 0, 6, "v"));  // transposed
   CHECK_NOTHROW(check_view({0, 1000000}, {1000000, 1}, 0, 0, "v"));  // empty
@@ -165,7 +166,7 @@ TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]
   CHECK_THAT(error_of([] { check_view({2, 3}, {3}, 0, 6, "v"); }), Catch::Contains("strides"));
 }
 
-TEST_CASE("a checkpoint of other model settings names the keys; eval.model_mismatch=warn goes on",
+TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_mismatch=warn goes on",
           "[train][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
@@ -174,25 +175,25 @@ TEST_CASE("a checkpoint of other model settings names the keys; eval.model_misma
 
   const auto other = tiny_config({"model.dparf.nk=2", "model.grouping.num_tokens=20"});
   auto b = make_model(other);
-  const std::string message = error_of([&] { th::train::load_weights(*b, dir / "stored.pt"); });
+  const std::string message = error_of([&] { th::pipeline::load_weights(*b, dir / "stored.pt"); });
   CHECK_THAT(message, Catch::Contains("model.dparf.nk: checkpoint 3, config 2") &&
                           Catch::Contains("model.grouping.num_tokens: checkpoint 24, config 20") &&
                           Catch::Contains("eval.model_mismatch=warn"));
-  CHECK_NOTHROW(th::train::load_weights(*b, dir / "stored.pt", /*allow_model_mismatch=*/true));
+  CHECK_NOTHROW(th::pipeline::load_weights(*b, dir / "stored.pt", /*allow_model_mismatch=*/true));
   CHECK(torch::equal(b->heads->alpha_fc->weight, model->heads->alpha_fc->weight));
   // Settings that do not change the trained function are not compared.
   auto direct = make_model(tiny_config({"model.exact_shortcuts=false"}));
-  CHECK_NOTHROW(th::train::load_weights(*direct, dir / "stored.pt"));
+  CHECK_NOTHROW(th::pipeline::load_weights(*direct, dir / "stored.pt"));
 
   // A checkpoint without a stored config: its run's config.yaml (two folders up) is compared.
   fs::create_directories(dir / "run" / "checkpoints");
   save_model_only(*model, dir / "run" / "checkpoints" / "old.pt", false);
   th::config::write_yaml(dir / "run" / "config.yaml", th::config::to_tree(tiny_config({"model.dparf.nk=5"})));
-  CHECK_THAT(error_of([&] { th::train::load_weights(*model, dir / "run" / "checkpoints" / "old.pt"); }),
+  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*model, dir / "run" / "checkpoints" / "old.pt"); }),
              Catch::Contains("model.dparf.nk: run config 5, config 3"));
   // Without either, only shapes can be checked.
   save_model_only(*model, dir / "bare.pt", false);
-  CHECK_NOTHROW(th::train::load_weights(*b, dir / "bare.pt"));
+  CHECK_NOTHROW(th::pipeline::load_weights(*b, dir / "bare.pt"));
 }
 
 TEST_CASE("missing, extra and reshaped parameters name the config key that decides them", "[train][checkpoint]") {
@@ -204,7 +205,7 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
     root.load_from((dir / "x.pt").string());
     root.read("model", m);
     auto b = make_model(wanted);
-    return error_of([&] { th::model::load_module_checked(*b, m, "x.pt"); });
+    return error_of([&] { th::pipeline::load_module_checked(*b, m, "x.pt"); });
   };
   const auto one = tiny_config(), two = tiny_config({"model.transhe.depth=2"});
   CHECK_THAT(load_into(two, one), Catch::Contains("holds module 'human.ViT.blocks.1'") &&
@@ -224,7 +225,7 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
     a->heads->alpha_fc->weight.fill_(7);
   }
   save_model_only(*a, dir / "y.pt", false);
-  CHECK_THROWS_AS(th::train::load_weights(*b, dir / "y.pt"), Error);
+  CHECK_THROWS_AS(th::pipeline::load_weights(*b, dir / "y.pt"), Error);
   CHECK(torch::equal(b->heads->alpha_fc->weight, before));
 }
 
@@ -252,7 +253,7 @@ TEST_CASE("a resumed run's optimiser state must be finite too", "[train][checkpo
   model->save(m2);
   optim.save(o2);
   out.write("model", m2);
-  th::model::write_model_config(out, model->config());
+  th::pipeline::write_model_config(out, model->config());
   out.write("optimizer", o2);
   for (const char* key : {"epoch", "step", "iteration"}) {
     torch::Tensor t;

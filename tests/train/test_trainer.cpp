@@ -11,6 +11,8 @@
 #include "train/schedule.hpp"
 #include "body/smpl.hpp"
 #include "data/dataset.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "train/trainer.hpp"
 #include "train/validation.hpp"
 #include "support/test_env.hpp"
@@ -26,7 +28,7 @@ th::Config tiny_config(std::vector<std::string> overrides = {}) {
 
 std::map<std::string, torch::Tensor> weights_of(const fs::path& checkpoint, const th::Config& c) {
   th::model::TransHuman model(c.model, c.render.cull_distance);
-  th::train::load_weights(*model, checkpoint);
+  th::pipeline::load_weights(*model, checkpoint);
   std::map<std::string, torch::Tensor> out;
   for (const auto& p : model->named_parameters()) out[p.key()] = p.value().clone();
   for (const auto& b : model->named_buffers()) out[b.key()] = b.value().clone();
@@ -124,9 +126,9 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
     torch::NoGradGuard g;
     model->heads->alpha_fc->bias.fill_(-100.0f);
   }
-  th::train::Tokens tokens(c.model.grouping, smpl->v_template);
+  th::pipeline::Tokens tokens(c.model.grouping, smpl->v_template);
   const fs::path dir = th::test::scratch_dir("train_collapse");
-  th::train::JsonlWriter log(dir / "metrics.jsonl");
+  th::pipeline::JsonlWriter log(dir / "metrics.jsonl");
   spdlog::default_logger()->sinks().push_back(sink);
   th::train::validate(*model, c, val, tokens, smpl->v_template, torch::kCPU,
                       dir, 1, log, 0);

@@ -1,10 +1,10 @@
-#include "train/images.hpp"
+#include "pipeline/images.hpp"
 
 #include <opencv2/imgproc.hpp>
 #include <torch/torch.h>
 
 
-namespace th::train {
+namespace th::pipeline {
 
 cv::Mat error_map(const torch::Tensor& pred, const torch::Tensor& gt, double full_scale) {
   const auto err = ((pred.detach().cpu().to(torch::kFloat32) - gt.detach().cpu().to(torch::kFloat32))
@@ -34,4 +34,4 @@ cv::Mat panel(const std::vector<cv::Mat>& images, const std::vector<std::string>
   return out;
 }
 
-}  // namespace th::train
+}  // namespace th::pipeline

@@ -1,4 +1,4 @@
-#include "model/checkpoint_import.hpp"
+#include "pipeline/reference_import.hpp"
 
 #include <caffe2/serialize/inline_container.h>
 #include <torch/torch.h>
@@ -9,12 +9,13 @@
 
 #include "core/error.hpp"
 #include "io/bytes.hpp"
-#include "io/npy.hpp"
 #include "io/pickle.hpp"
-#include "model/checked_load.hpp"
 #include "model/transhuman.hpp"
+#include "pipeline/checked_load.hpp"
 
-namespace th::model {
+namespace th::pipeline {
+
+using model::TransHumanImpl;
 namespace {
 
 using io::Value;
@@ -198,42 +199,4 @@ ImportReport import_reference_checkpoint(TransHumanImpl& model, const std::files
   return import_reference_state(model, read_torch_state_dict(path, "net"), path.string());
 }
 
-void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz) {
-  encoder.load_resnet_state(io::read_npz(npz), npz.string());
-}
-
-void save_model_weights(const TransHumanImpl& model, const std::filesystem::path& path) {
-  torch::serialize::OutputArchive archive;
-  write_model_config(archive, model.config());
-  for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
-  for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
-  std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
-  archive.save_to(bytes);
-  io::detail::write_file_atomic(path, bytes.str());
-}
-
-void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path) {
-  if (!std::filesystem::exists(path)) fail("model weights '", path.string(), "' do not exist");
-  check_checkpoint_archive(path);
-  torch::serialize::InputArchive archive;
-  try {
-    archive.load_from(path.string());
-  } catch (const c10::Error& e) {
-    fail(path.string(), ": cannot read model weights (", e.what_without_backtrace(), ")");
-  }
-  torch::NoGradGuard no_grad;
-  std::vector<std::pair<torch::Tensor, torch::Tensor>> copies;  // all checked before any is copied
-  auto read = [&](const std::string& name, torch::Tensor& dst, bool buffer) {
-    torch::Tensor t;
-    if (!archive.try_read(name, t, buffer)) fail(path.string(), ": missing tensor '", name, "'");
-    check_loaded_tensor(t, path.string(), name);
-    if (t.sizes() != dst.sizes())
-      fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ", dst.sizes());
-    copies.emplace_back(dst, t);
-  };
-  for (auto& p : model.named_parameters()) read(p.key(), p.value(), false);
-  for (auto& b : model.named_buffers()) read(b.key(), b.value(), true);
-  for (auto& [dst, src] : copies) dst.copy_(src);
-}
-
-}  // namespace th::model
+}  // namespace th::pipeline

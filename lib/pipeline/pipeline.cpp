@@ -1,13 +1,12 @@
-#include "train/pipeline.hpp"
+#include "pipeline/pipeline.hpp"
 
 #include <torch/torch.h>
 
 #include <chrono>
 
 #include "metrics/metrics.hpp"
-#include "render/progressive.hpp"
 
-namespace th::train {
+namespace th::pipeline {
 
 Tokens::Tokens(const GroupingConfig& config, const torch::Tensor& canonical)
     : grouping_(body::make_grouping(config)), canonical_(canonical.to(torch::kFloat64)) {}
@@ -46,18 +45,8 @@ Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
                        bool cull_in_training, render::Profile* profile) {
   Rendered out;
   out.cache = model.prepare(inputs);
-  model::FrameField field(model, out.cache, training ? rc.train_chunk_points : rc.chunk_points,
-                          /*checkpoint=*/training);
-  if (training) {
-    render::VolumeRenderer renderer(rc, profile);
-    out.result = renderer.render(field, rays, /*stratified=*/true,
-                                 cull_in_training ? out.cache.body.get() : nullptr);
-  } else if (rc.progressive) {
-    out.result = render::render_progressive(field, *out.cache.body, rays, rc, profile);
-  } else {
-    render::VolumeRenderer renderer(rc, profile);
-    out.result = renderer.render(field, rays, /*stratified=*/false);
-  }
+  out.result = training ? model::render_training_rays(model, out.cache, rays, rc, cull_in_training, profile)
+                        : model::render_rays(model, out.cache, rays, rc, profile);
   return out;
 }
 
@@ -92,4 +81,4 @@ torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel
   return img.reshape({height, width, 3});
 }
 
-}  // namespace th::train
+}  // namespace th::pipeline

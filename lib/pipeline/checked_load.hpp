@@ -20,7 +20,7 @@ namespace torch::nn {
 class Module;
 }
 
-namespace th::model {
+namespace th::pipeline {
 
 // Throws th::Error naming the file and the member when the zip is malformed, a member's data
 // runs past the end of the file, a storage record (…/data/…) is compressed, a compressed
@@ -74,4 +74,4 @@ std::vector<std::string> model_config_differences(torch::serialize::InputArchive
                                                   const std::filesystem::path& checkpoint,
                                                   const ModelConfig& config);
 
-}  // namespace th::model
+}  // namespace th::pipeline

@@ -1,7 +1,8 @@
 #pragma once
 // The glue between the stages (STYLE: data flows one way): a dataset sample becomes the
-// network's frame inputs, the network a radiance field, the renderer its image. Shared by the
-// trainer, the evaluator and the free-viewpoint renderer.
+// network's frame inputs (with its token grouping), the network a radiance field, the renderer
+// its image, the image a scored view. Shared by training, evaluation and inference, which use
+// this library rather than each other.
 
 #include <torch/types.h>
 
@@ -15,7 +16,7 @@
 #include "model/transhuman.hpp"
 #include "render/volume.hpp"
 
-namespace th::train {
+namespace th::pipeline {
 
 // Token labels per frame from the configured grouping (static groupings compute once).
 class Tokens {
@@ -36,9 +37,10 @@ model::FrameInputs frame_inputs(const data::Sample& sample, const torch::Tensor&
 // The sample's rays for the renderer, on `device`.
 render::Rays sample_rays(const data::Sample& sample, const torch::Device& device);
 
-// Renders the sample's rays with the model. Training: stratified samples, autograd on, every
-// sample evaluated (culled when train.skip_far_points). Inference: no grad, progressive when
-// render.progressive, full rendering otherwise.
+// Prepares the frame and renders the sample's rays: the one place where training and inference
+// rendering part (model::render_training_rays / model::render_rays say how). Training:
+// stratified samples, autograd on, every sample evaluated (culled when train.skip_far_points).
+// Inference: no grad, progressive when render.progressive, full rendering otherwise.
 struct Rendered {
   render::RenderResult result;
   model::FrameCache cache;
@@ -64,4 +66,4 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rende
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,
                             int64_t width);
 
-}  // namespace th::train
+}  // namespace th::pipeline

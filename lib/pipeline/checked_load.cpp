@@ -1,4 +1,4 @@
-#include "model/checked_load.hpp"
+#include "pipeline/checked_load.hpp"
 
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
@@ -14,7 +14,7 @@
 #include "io/pickle.hpp"
 #include "io/zip.hpp"
 
-namespace th::model {
+namespace th::pipeline {
 namespace fs = std::filesystem;
 
 torch::ScalarType storage_type(const std::string& cls, const std::string& source) {
@@ -320,4 +320,4 @@ std::vector<std::string> model_config_differences(torch::serialize::InputArchive
   return out;
 }
 
-}  // namespace th::model
+}  // namespace th::pipeline

@@ -1,11 +1,11 @@
-#include "train/jsonl.hpp"
+#include "pipeline/jsonl.hpp"
 
 #include <cmath>
 #include <cstdio>
 
 #include "core/error.hpp"
 
-namespace th::train {
+namespace th::pipeline {
 namespace {
 
 std::string quote(const std::string& s) {
@@ -66,4 +66,4 @@ void JsonlWriter::write(const JsonLine& line) {
   if (!out_) fail("cannot write to '", file_.string(), "'");
 }
 
-}  // namespace th::train
+}  // namespace th::pipeline

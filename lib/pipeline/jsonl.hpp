@@ -8,7 +8,7 @@
 #include <utility>
 #include <vector>
 
-namespace th::train {
+namespace th::pipeline {
 
 class JsonLine {
  public:
@@ -32,4 +32,4 @@ class JsonlWriter {
   std::ofstream out_;
 };
 
-}  // namespace th::train
+}  // namespace th::pipeline

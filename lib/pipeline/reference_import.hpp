@@ -1,7 +1,7 @@
 #pragma once
-// Weights from files (SPEC 8): checkpoints of the reference implementation (.pth, PyTorch's
-// zip format: data.pkl + data/<storage> records), ImageNet ResNet-18 weights converted by
-// scripts/export_pretrained.py, and this project's own model weights.
+// Checkpoints of the reference implementation (SPEC 8): .pth files in PyTorch's zip format
+// (data.pkl + data/<storage> records), read without executing anything, and their tensors copied
+// into our model under our names.
 
 #include <torch/types.h>
 
@@ -11,9 +11,10 @@
 #include <vector>
 
 namespace th::model {
-
 class TransHumanImpl;
-class EncoderImpl;
+}
+
+namespace th::pipeline {
 
 // The tensors of a PyTorch zip checkpoint. The pickle is read by the project's safe reader
 // (io/pickle.hpp) with PyTorch's storages (persistent ids), torch._utils._rebuild_tensor_v2,
@@ -38,16 +39,8 @@ std::string reference_name(const std::string& model_name);
 
 // Copies a reference state dict into the model. Throws th::Error naming the first missing or
 // mis-shaped key (and the source); nothing is modified then.
-ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
+ImportReport import_reference_state(model::TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source);
-ImportReport import_reference_checkpoint(TransHumanImpl& model, const std::filesystem::path& path);
+ImportReport import_reference_checkpoint(model::TransHumanImpl& model, const std::filesystem::path& path);
 
-// ImageNet ResNet-18 weights: an .npz with torchvision's resnet18 state dict names, written by
-// scripts/export_pretrained.py. Throws th::Error naming a missing or mis-shaped key.
-void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz);
-
-// This project's model weights (parameters and buffers by name, torch::serialize archive).
-void save_model_weights(const TransHumanImpl& model, const std::filesystem::path& path);
-void load_model_weights(TransHumanImpl& model, const std::filesystem::path& path);
-
-}  // namespace th::model
+}  // namespace th::pipeline

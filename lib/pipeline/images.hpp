@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace th::train {
+namespace th::pipeline {
 
 // Per-pixel mean absolute error of two (H, W, 3) images, as a colour map (0 -> dark blue,
 // >= `full_scale` -> red).
@@ -17,4 +17,4 @@ cv::Mat error_map(const torch::Tensor& pred, const torch::Tensor& gt, double ful
 // Images of equal height side by side (others are scaled to the first's height), each with a
 // caption strip on top.
 cv::Mat panel(const std::vector<cv::Mat>& images, const std::vector<std::string>& captions);
-}  // namespace th::train
+}  // namespace th::pipeline

@@ -1,0 +1,44 @@
+#pragma once
+// SPEC 9: the exact shortcuts, in one place. Each is a transformation of one stage of the
+// per-frame state (model/frame_cache.hpp), made once per frame, that leaves the rendered
+// function unchanged up to float rounding; model.exact_shortcuts: false keeps every stage in its
+// reference form (tests/model/test_shortcuts.cpp and test_formulas.cpp compare the two).
+// With each transformation, the per-point code that reads the transformed stage.
+//
+// Not a stage transformation, but exact as well and also part of SPEC 9, in transhuman.cpp:
+// during checkpointed training colour is evaluated only where sigma_raw > 0 (the compositing
+// weight is 0 elsewhere, so neither the image nor a gradient changes).
+
+#include <torch/torch.h>
+
+#include "model/frame_cache.hpp"
+
+namespace th::model {
+
+class EncoderImpl;
+class FDIImpl;
+class HeadsImpl;
+
+// 1. Human stage. fc_0 is linear and DPaRF's Nk weights sum to 1, so fc_0's token part is
+// applied to the Nt tokens once per frame instead of to Nk tokens at every point:
+// table (Nt, V * 256) = fc_0_tokens(T_v(c)) + bias, view-major within a row. Read per point by
+// TokenFieldsImpl::forward (weighted_gather of the Nk rows, plus fc_0's coordinate part).
+// tokens: (V, Nt, C).
+torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& fc_0);
+
+// 2. Folded weights. FDI: fc_1 is folded into both value projections and each key projection
+// shares one product with its value projection (read by FDIImpl::forward_folded). Colour head:
+// view_fc's feature part is composed with feature_fc, and with rgb_res_0 into one 256-channel
+// readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v (read by HeadsImpl::color_folded).
+FDIFolded fold_fdi(const FDIImpl& fdi);
+HeadsFolded fold_heads(const HeadsImpl& heads);
+FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads);
+
+// 3. Pixel stage. A linear layer that reads p_v commutes with bilinear upsampling and with
+// sampling, so FDI's alpha_res_0 and the colour head's folded readout are applied to each
+// ResNet level (and the raw-RGB channels to the image) once per frame: PixelStage::alpha and
+// ::color, read per point by PixelReadout::sample. p_v is never formed at full resolution.
+void make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                         const HeadsFolded& heads, PixelStage& pixels);
+
+}  // namespace th::model

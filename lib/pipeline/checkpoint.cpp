@@ -1,0 +1,169 @@
+#include "pipeline/checkpoint.hpp"
+
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include <sstream>
+
+#include "core/error.hpp"
+#include "io/bytes.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checked_load.hpp"
+#include "pipeline/reference_import.hpp"
+
+namespace th::pipeline {
+namespace fs = std::filesystem;
+
+namespace {
+
+// The checkpoint archive: model weights and buffers, optimiser state and the run's position.
+void write_checkpoint(torch::serialize::OutputArchive& root, model::TransHumanImpl& model,
+                      torch::optim::Adam& optim, const CheckpointState& st) {
+  torch::serialize::OutputArchive m, o;
+  model.save(m);
+  optim.save(o);
+  root.write("model", m);
+  write_model_config(root, model.config());
+  root.write("optimizer", o);
+  root.write("epoch", torch::tensor(int64_t(st.epoch)));
+  root.write("step", torch::tensor(st.step));
+  root.write("iteration", torch::tensor(int64_t(st.iteration)));
+}
+
+CheckpointState read_checkpoint(torch::serialize::InputArchive& root, model::TransHumanImpl& model,
+                                torch::optim::Adam& optim, const std::string& source) {
+  torch::serialize::InputArchive m, o;
+  root.read("model", m);
+  root.read("optimizer", o);
+  load_module_checked(model, m, source);
+  optim.load(o);
+  for (const auto& entry : optim.state()) {  // Adam's moments resume the run: finite too
+    const auto& state = static_cast<const torch::optim::AdamParamState&>(*entry.second);
+    check_finite(state.exp_avg(), source + ": optimiser state exp_avg");
+    check_finite(state.exp_avg_sq(), source + ": optimiser state exp_avg_sq");
+  }
+  torch::Tensor epoch, step, iteration;
+  root.read("epoch", epoch);
+  root.read("step", step);
+  root.read("iteration", iteration);
+  return {int(epoch.item<int64_t>()), step.item<int64_t>(), int(iteration.item<int64_t>())};
+}
+
+}  // namespace
+
+// Writes `path` atomically: the archive goes to a temporary file renamed over the target, so a
+// checkpoint is never half-written.
+void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::optim::Adam& optim,
+                     const CheckpointState& st) {
+  torch::serialize::OutputArchive root;
+  write_checkpoint(root, model, optim, st);
+  // Serialised in memory, then written by write_file_atomic: a failing write (disk full) is an
+  // error naming the file and leaves no partial file (LibTorch's file writer would throw from its
+  // destructor and terminate the process).
+  std::ostringstream archive;
+  try {
+    root.save_to(archive);
+  } catch (const c10::Error& e) {
+    fail("cannot serialise checkpoint '", path.string(), "': ", e.what_without_backtrace());
+  }
+  io::detail::write_file_atomic(path, archive.str());
+}
+
+CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,
+                                torch::optim::Adam& optim) {
+  if (!fs::exists(path)) fail("cannot resume: '", path.string(), "' does not exist");
+  check_checkpoint_archive(path);
+  torch::serialize::InputArchive root;
+  try {
+    root.load_from(path.string());
+    return read_checkpoint(root, model, optim, path.string());
+  } catch (const c10::Error& e) {
+    fail("checkpoint '", path.string(), "' cannot be read: ", e.what_without_backtrace());
+  }
+}
+
+std::string checkpoint_bytes(model::TransHumanImpl& model, torch::optim::Adam& optim,
+                             const CheckpointState& state) {
+  std::ostringstream out;
+  torch::serialize::OutputArchive root;
+  write_checkpoint(root, model, optim, state);
+  root.save_to(out);
+  return out.str();
+}
+
+CheckpointState restore_checkpoint_bytes(const std::string& bytes, model::TransHumanImpl& model,
+                                         torch::optim::Adam& optim, const std::string& source) {
+  torch::serialize::InputArchive root;
+  try {
+    root.load_from(bytes.data(), bytes.size());
+  } catch (const c10::Error& e) {
+    fail(source, " cannot be read: ", e.what_without_backtrace());
+  }
+  return read_checkpoint(root, model, optim, source);
+}
+
+void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint, bool allow_model_mismatch) {
+  if (!fs::exists(checkpoint)) fail("checkpoint '", checkpoint.string(), "' does not exist");
+  if (checkpoint.extension() == ".pth") {
+    const auto report = import_reference_checkpoint(model, checkpoint);
+    spdlog::info("imported {} tensors of the reference checkpoint {}", report.loaded.size(),
+                 checkpoint.string());
+    return;
+  }
+  check_checkpoint_archive(checkpoint);
+  torch::serialize::InputArchive root, m;
+  try {
+    root.load_from(checkpoint.string());
+    root.read("model", m);
+  } catch (const c10::Error& e) {
+    fail("checkpoint '", checkpoint.string(), "' cannot be read: ", e.what_without_backtrace());
+  }
+  // Another model configuration: different shapes fail below naming the parameter; different
+  // values of shape-neutral keys (nk, num_tokens, ...) would silently compute something else.
+  const auto changed = model_config_differences(root, checkpoint, model.config());
+  if (!changed.empty()) {
+    std::string list;
+    for (const auto& c : changed) list += (list.empty() ? "" : "; ") + c;
+    if (!allow_model_mismatch)
+      fail("checkpoint '", checkpoint.string(), "' was trained with other model settings (", list,
+           "): use the run's config.yaml as --config, or eval.model_mismatch=warn to go on anyway");
+    spdlog::warn("checkpoint {} was trained with other model settings: {}", checkpoint.string(), list);
+  }
+  load_module_checked(model, m, checkpoint.string());
+}
+
+void save_model_weights(const model::TransHumanImpl& model, const std::filesystem::path& path) {
+  torch::serialize::OutputArchive archive;
+  write_model_config(archive, model.config());
+  for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
+  for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
+  std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
+  archive.save_to(bytes);
+  io::detail::write_file_atomic(path, bytes.str());
+}
+
+void load_model_weights(model::TransHumanImpl& model, const std::filesystem::path& path) {
+  if (!std::filesystem::exists(path)) fail("model weights '", path.string(), "' do not exist");
+  check_checkpoint_archive(path);
+  torch::serialize::InputArchive archive;
+  try {
+    archive.load_from(path.string());
+  } catch (const c10::Error& e) {
+    fail(path.string(), ": cannot read model weights (", e.what_without_backtrace(), ")");
+  }
+  torch::NoGradGuard no_grad;
+  std::vector<std::pair<torch::Tensor, torch::Tensor>> copies;  // all checked before any is copied
+  auto read = [&](const std::string& name, torch::Tensor& dst, bool buffer) {
+    torch::Tensor t;
+    if (!archive.try_read(name, t, buffer)) fail(path.string(), ": missing tensor '", name, "'");
+    check_loaded_tensor(t, path.string(), name);
+    if (t.sizes() != dst.sizes())
+      fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ", dst.sizes());
+    copies.emplace_back(dst, t);
+  };
+  for (auto& p : model.named_parameters()) read(p.key(), p.value(), false);
+  for (auto& b : model.named_buffers()) read(b.key(), b.value(), true);
+  for (auto& [dst, src] : copies) dst.copy_(src);
+}
+
+}  // namespace th::pipeline
