@@ -55,11 +55,17 @@ function(th_test name)
   target_compile_definitions(${name} PRIVATE TH_TEST_BUILD_DIR="${CMAKE_BINARY_DIR}"
                                              TH_TEST_PYTHON="${TH_PYTHON}")
   th_use_pch(${name})
-  # --warn NoTests: a CTest entry whose filter matches no test case fails instead of passing
-  # empty (a ';' in a test name once split one case into two entries that ran nothing).
+  # A CTest entry whose filter matches no test case fails instead of passing empty (a ';' in a
+  # test name once split one case into two entries that ran nothing). Catch2 2: NoTests;
+  # Catch2 3 names it UnmatchedTestSpec (and knows no NoTests).
+  if(Catch2_VERSION VERSION_GREATER_EQUAL 3)
+    set(no_empty_runs --warn UnmatchedTestSpec)
+  else()
+    set(no_empty_runs --warn NoTests)
+  endif()
   catch_discover_tests(${name}
     WORKING_DIRECTORY ${PROJECT_SOURCE_DIR}
     TEST_PREFIX "${name}:"
-    EXTRA_ARGS --warn NoTests
+    EXTRA_ARGS ${no_empty_runs}
     PROPERTIES ${ARG_PROPERTIES})
 endfunction()
