@@ -106,36 +106,43 @@ torch::Tensor TransHumanImpl::pixel_features_at(const PixelStage& px, const torc
       .view({n, V, -1});
 }
 
-torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadout& readout, const torch::Tensor& uv) {
+torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadout& readout,
+                                         const torch::Tensor& uv) {
   ScopedTimer timer(profile_, "sampling");
   const auto n = uv.size(0), V = uv.size(1);
   const auto flat = uv.reshape({-1, 2});
   const auto view = view_ids(n, V, uv.device());
-  return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view)).view({n, V, -1});
+  return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
+      .view({n, V, -1});
 }
 
-TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
+TransHumanImpl::PointFeatures TransHumanImpl::point_features(const FrameCache& cache,
+                                                             const torch::Tensor& pts) {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
   const auto& geo = cache.geometry;
-  Trunk out;
-  torch::Tensor s, a;  // FDI's inputs: human representation s_v, appearance a_v (N, V, 256)
+  PointFeatures f;
   if (human) {
     ScopedTimer timer(profile_, "dparf");
     const auto xs = torch::mm(pts - geo.Th, geo.Rh);
-    s = human->forward(cache.human, xs);
+    f.s = human->forward(cache.human, xs);
   }
   {
     ScopedTimer timer(profile_, "sampling");
-    out.uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
+    f.uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
   }
   if (config_.fdi.appearance) {
-    a = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.alpha, out.uv)
-                                : fdi->alpha_res_0(pixel_features_at(cache.pixels, out.uv));
-    a.relu_();
+    f.a = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.alpha, f.uv)
+                                  : fdi->alpha_res_0(pixel_features_at(cache.pixels, f.uv));
+    f.a.relu_();
   }
+  return f;
+}
+
+TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
+  const PointFeatures f = point_features(cache, pts);
   ScopedTimer timer(profile_, "fdi");
-  out.e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, s, a) : fdi->forward(s, a);
-  return out;
+  auto e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, f.s, f.a) : fdi->forward(f.s, f.a);
+  return {std::move(e), f.uv};
 }
 
 torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs) {

@@ -51,7 +51,14 @@ class TransHumanImpl : public torch::nn::Module {
   Heads heads{nullptr};
 
  private:
-  // The per-point trunk: e (N, V, 256), plus what the colour head needs.
+  // Per chunk of points, FDI's inputs: the human representation s_v (DPaRF, or SPC) and the
+  // appearance a_v sampled at the points' projections uv (SPEC 3.3, 3.4).
+  struct PointFeatures {
+    torch::Tensor s, a;  // (N, V, 256) each; undefined when the branch is off (ablations)
+    torch::Tensor uv;    // (N, V, 2) projections into the reference views
+  };
+  PointFeatures point_features(const FrameCache& cache, const torch::Tensor& pts);
+  // FDI's output, the per-point trunk e_v, plus what the colour head needs.
   struct Trunk {
     torch::Tensor e, uv;  // e: (N, V, 256); uv: (N, V, 2)
   };
