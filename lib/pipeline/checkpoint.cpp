@@ -16,6 +16,19 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// An archive serialised in memory. Every file is then written by write_file_atomic: a failing
+// write (disk full) is an error naming the file and leaves no partial file, where LibTorch's own
+// file writer would throw from its destructor and terminate the process.
+std::string archive_bytes(torch::serialize::OutputArchive& archive, const std::string& what) {
+  std::ostringstream out;
+  try {
+    archive.save_to(out);
+  } catch (const c10::Error& e) {
+    fail("cannot serialise ", what, ": ", e.what_without_backtrace());
+  }
+  return out.str();
+}
+
 // The checkpoint archive: model weights and buffers, optimiser state and the run's position.
 void write_checkpoint(torch::serialize::OutputArchive& root, model::TransHumanImpl& model,
                       torch::optim::Adam& optim, const CheckpointState& st) {
@@ -51,22 +64,11 @@ CheckpointState read_checkpoint(torch::serialize::InputArchive& root, model::Tra
 
 }  // namespace
 
-// Writes `path` atomically: the archive goes to a temporary file renamed over the target, so a
-// checkpoint is never half-written.
 void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::optim::Adam& optim,
                      const CheckpointState& st) {
   torch::serialize::OutputArchive root;
   write_checkpoint(root, model, optim, st);
-  // Serialised in memory, then written by write_file_atomic: a failing write (disk full) is an
-  // error naming the file and leaves no partial file (LibTorch's file writer would throw from its
-  // destructor and terminate the process).
-  std::ostringstream archive;
-  try {
-    root.save_to(archive);
-  } catch (const c10::Error& e) {
-    fail("cannot serialise checkpoint '", path.string(), "': ", e.what_without_backtrace());
-  }
-  io::detail::write_file_atomic(path, archive.str());
+  io::detail::write_file_atomic(path, archive_bytes(root, "checkpoint '" + path.string() + "'"));
 }
 
 CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,
@@ -84,11 +86,9 @@ CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& mod
 
 std::string checkpoint_bytes(model::TransHumanImpl& model, torch::optim::Adam& optim,
                              const CheckpointState& state) {
-  std::ostringstream out;
   torch::serialize::OutputArchive root;
   write_checkpoint(root, model, optim, state);
-  root.save_to(out);
-  return out.str();
+  return archive_bytes(root, "rank 0's state");
 }
 
 CheckpointState restore_checkpoint_bytes(const std::string& bytes, model::TransHumanImpl& model,
@@ -137,9 +137,7 @@ void save_model_weights(const model::TransHumanImpl& model, const std::filesyste
   write_model_config(archive, model.config());
   for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
   for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
-  std::ostringstream bytes;  // in memory, then written atomically (no partial file on a full disk)
-  archive.save_to(bytes);
-  io::detail::write_file_atomic(path, bytes.str());
+  io::detail::write_file_atomic(path, archive_bytes(archive, "model weights '" + path.string() + "'"));
 }
 
 void load_model_weights(model::TransHumanImpl& model, const std::filesystem::path& path) {

@@ -81,7 +81,7 @@ class Run {
   StepPosition position(int epoch) const {
     return {st_.step, epoch, comm_ ? proc_ : -1, last_ckpt_.empty() ? std::string() : last_ckpt_.string()};
   }
-  void optimiser_step(const StepStats& stats, double seconds, double lr, int epoch, const data::Prefetcher& loader);
+  void record_step(const StepStats& stats, double seconds, double lr, int epoch, const data::Prefetcher& loader);
   void log_step(const StepStats& stats, double lr, int epoch, const data::Prefetcher& loader);
   bool out_of_time();
   void end_of_epoch(int epoch);
@@ -199,7 +199,7 @@ TrainSummary Run::go() {
       st_.iteration = it + 1;
       st_.epoch = epoch;
       const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      optimiser_step(stats, seconds, lr, epoch, loader);
+      record_step(stats, seconds, lr, epoch, loader);
       if (out_of_time()) {
         spdlog::info("time budget of {} minutes reached at step {}", tc_.max_minutes, st_.step);
         on_lead([&] {
@@ -222,7 +222,7 @@ TrainSummary Run::go() {
 }
 
 // The step's figures into the log window, and a metrics line when one is due.
-void Run::optimiser_step(const StepStats& stats, double seconds, double lr, int epoch,
+void Run::record_step(const StepStats& stats, double seconds, double lr, int epoch,
                          const data::Prefetcher& loader) {
   const double loss_value = stats.loss / world_;
   window_.loss += loss_value, window_.psnr += stats.psnr / world_, window_.seconds += seconds;
