@@ -18,65 +18,19 @@
 #include <sstream>
 #include <thread>
 
-#include <c10/core/Allocator.h>
-#include <c10/util/ThreadLocalDebugInfo.h>
-
+#include "common.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
 #include "model/transhuman.hpp"
 #include "render/progressive.hpp"
 
 using namespace th;
-using Clock = std::chrono::steady_clock;
+using bench::Clock;
+using bench::fmt;
+using bench::PeakMemory;
+using bench::seconds_since;
 
 namespace {
-
-std::string fmt(double v, int prec = 1) {
-  std::ostringstream s;
-  s << std::fixed << std::setprecision(prec) << v;
-  return s.str();
-}
-
-double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
-
-int64_t status_kb(const char* key) {
-  std::ifstream f("/proc/self/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind(key, 0) == 0) return std::stoll(line.substr(std::strlen(key)));
-  return -1;
-}
-
-// Peak bytes of LibTorch CPU tensors allocated during a section and still alive, from c10's
-// memory-reporting hook (the allocator reports every allocation and free to the thread's
-// MemoryReportingInfoBase while one is installed).
-struct TensorMemoryHook : c10::MemoryReportingInfoBase {
-  int64_t base = -1, peak = 0;
-  void reportMemoryUsage(void*, int64_t size, th::compat::MemoryTotal total, th::compat::MemoryTotal,
-                         c10::Device device) override {
-    if (!device.is_cpu()) return;
-    const auto total_allocated = static_cast<int64_t>(total);
-    if (base < 0) base = total_allocated - size;
-    peak = std::max(peak, total_allocated - base);
-  }
-  bool memoryProfilingEnabled() const override { return true; }
-};
-
-// Peak memory of a section: tensor bytes (allocator hook) and the resident-set growth (VmHWM
-// after a reset through /proc/self/clear_refs, minus VmRSS before; a lower bound when freed
-// heap memory is reused).
-struct PeakMemory {
-  int64_t base_kb;
-  std::shared_ptr<TensorMemoryHook> hook = std::make_shared<TensorMemoryHook>();
-  c10::DebugInfoGuard guard{c10::DebugInfoKind::PROFILER_STATE, hook};
-  PeakMemory() {
-    std::ofstream("/proc/self/clear_refs") << "5";
-    base_kb = status_kb("VmRSS:");
-  }
-  double tensor_mib() const { return hook->peak / 1048576.0; }
-  double rss_mib() const { return (status_kb("VmHWM:") - base_kb) / 1024.0; }
-  std::string text() const { return fmt(tensor_mib(), 0) + " MiB tensors (RSS +" + fmt(rss_mib(), 0) + " MiB)"; }
-};
 
 torch::Tensor rotation_y(double a) {
   return torch::tensor({std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)}).view({3, 3});
@@ -198,13 +152,7 @@ torch::Tensor body_points(const Scene& s, const render::BodyDistance& body, int6
   return pts.index_select(0, sorted);
 }
 
-struct Report {
-  std::ostringstream md;
-  void line(const std::string& s) {
-    std::cout << s << std::endl;
-    md << s << "\n";
-  }
-};
+using bench::Report;
 
 
 void shares_into(std::string& s, const render::Profile& p, double total) {
@@ -263,12 +211,7 @@ int main(int argc, char** argv) {
          std::to_string(size) + ", 6890 body vertices, 300 tokens, default model (ViT depth 12), random weights.");
   const char* wait = std::getenv("OMP_WAIT_POLICY");
   r.line(std::string("OMP_WAIT_POLICY=") + (wait ? wait : "(unset: libgomp default, active spinning)") + ".");
-  auto loadavg = [] {
-    std::ifstream f("/proc/loadavg");
-    std::string a, b, c;
-    f >> a >> b >> c;
-    return a + " " + b + " " + c;
-  };
+  const auto loadavg = bench::load_average;
   r.line("Machine: " + std::to_string(std::thread::hardware_concurrency()) +
          " cores shared with other jobs; load average at start " + loadavg() + ".");
   r.line(std::string("Allocator: glibc malloc") + (system_malloc ? " (defaults)" : " with M_MMAP_MAX=0, no trimming") + ".");
@@ -489,6 +432,7 @@ int main(int argc, char** argv) {
              std::to_string(rcs.chunk_points) + "): " + fmt(sec, 2) + " s, peak memory " + mem.text() + "; " + std::to_string(st.rays) + " in-box rays, " + std::to_string(st.points) + " samples, " +
              std::to_string(st.culled_points) + " culled (" + fmt(100.0 * st.culled_points / std::max<int64_t>(st.points, 1)) +
              "%), " + std::to_string(st.density_points) + " density, " + std::to_string(st.color_points) + " colour, " +
+             std::to_string(st.terminated_points) + " skipped by early termination, " +
              std::to_string(st.empty_rays) + " empty rays; " + fmt(st.density_points / sec, 0) + " kept points/s end to end");
       shares(r, prof, sec);
       r.line("");

@@ -64,6 +64,8 @@ void validate_section(const RenderConfig& c, const std::string& path) {
   require(c.samples >= 2, path, "samples", c.samples, "must be >= 2");
   require(c.cull_distance > 0, path, "cull_distance", c.cull_distance, "must be positive");
   require(c.chunk_points >= 1024, path, "chunk_points", c.chunk_points, "must be >= 1024");
+  require(c.termination_transmittance >= 0 && c.termination_transmittance < 1, path, "termination_transmittance",
+          c.termination_transmittance, "must be in [0, 1) (0: off)");
   require(c.train_chunk_points >= 256, path, "train_chunk_points", c.train_chunk_points, "must be >= 256");
 }
 

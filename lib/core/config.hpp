@@ -114,6 +114,10 @@ struct RenderConfig {
   bool progressive = true;       // inference: distance culling, colour only where sigma > 0
   double cull_distance = 0.1;    // metres from the nearest body vertex
   int64_t chunk_points = 4096;  // per-point work in chunks of this many points (bench/results/model.md)
+  // Progressive rendering marches each ray front to back and stops once its transmittance is
+  // below this bound: the samples it skips change rgb and acc by at most the bound (SPEC 4 note
+  // in render/progressive.hpp). 0: every kept sample is evaluated (the exact render).
+  double termination_transmittance = 1e-4;
   // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
   int64_t train_chunk_points = 4096;
 };
@@ -150,6 +154,10 @@ struct EvalConfig {
   std::string lpips_weights = "";
   int limit = 0;                 // 0: all images
   bool save_images = true;
+  // Target views of one frame share its prepared stages (encoder, TransHE, DPaRF tokens, painted
+  // vertices; they depend only on the frame's inputs, compared value by value). false: every
+  // view prepares its frame again.
+  bool reuse_frames = true;
   // A checkpoint trained with other model.* values (its stored config, or its run's config.yaml):
   // "error" names the keys and stops; "warn" names them and goes on (a deliberate ablation).
   std::string model_mismatch = "error";
@@ -254,6 +262,7 @@ template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("progressive", c.progressive);
   v("cull_distance", c.cull_distance);
   v("chunk_points", c.chunk_points);
+  v("termination_transmittance", c.termination_transmittance);
   v("train_chunk_points", c.train_chunk_points);
 }
 template <class V> void visit_fields(V& v, TrainConfig& c) {
@@ -283,6 +292,7 @@ template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("lpips_weights", c.lpips_weights);
   v("limit", c.limit);
   v("save_images", c.save_images);
+  v("reuse_frames", c.reuse_frames);
   v.choice("model_mismatch", c.model_mismatch, {"error", "warn"});
 }
 template <class V> void visit_fields(V& v, Config& c) {

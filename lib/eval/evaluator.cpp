@@ -33,11 +33,11 @@ std::string fmt(double v, int digits) {
 void write_outputs(const EvalSummary& s, const fs::path& dir) {
   {
     std::ofstream csv(dir / "per_image.csv");
-    csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n";
+    csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points\n";
     for (const auto& r : s.per_image)
       csv << r.human << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
           << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ','
-          << r.points << ',' << r.culled_points << '\n';
+          << r.points << ',' << r.culled_points << ',' << r.evaluated_points << '\n';
   }
   {
     pipeline::JsonLine j;
@@ -89,13 +89,15 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   EvalSummary summary;
   summary.setting = setting;
   summary.lpips_available = lpips != nullptr;
+  pipeline::FrameReuse frames;
   Progress progress("eval " + setting, int64_t(n), "img");
   for (size_t i = 0; i < n; ++i) {
     const data::Sample s = loader.next();
     const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
-    const auto r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device);
+    const auto r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
+                                           config.eval.reuse_frames ? &frames : nullptr);
     summary.per_image.push_back({s.human, s.frame, s.target_view, r.psnr, r.ssim, r.lpips, r.seconds,
-                                 r.stats.points, r.stats.culled_points});
+                                 r.stats.points, r.stats.culled_points, r.stats.density_points});
     if (config.eval.save_images) {
       std::vector<cv::Mat> imgs{video::to_bgr8(r.pred), video::to_bgr8(r.gt)};
       std::vector<std::string> captions{"prediction " + fmt(r.psnr, 2) + " dB", "ground truth"};
@@ -112,6 +114,9 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     progress.advance(1, note);
   }
   progress.finish();
+  if (config.eval.reuse_frames)
+    spdlog::info("eval: {} frames prepared for {} views (eval.reuse_frames)", frames.prepared(),
+                 frames.prepared() + frames.reused());
 
   summary.images = int(summary.per_image.size());
   if (summary.images == 0) fail("setting '", setting, "' has no images to evaluate");

@@ -20,6 +20,7 @@ struct ImageScore {
   double seconds = 0;
   int64_t points = 0;         // rays x samples
   int64_t culled_points = 0;  // of those, farther than render.cull_distance from the body
+  int64_t evaluated_points = 0;  // points whose density the network computed
 };
 
 struct EvalSummary {

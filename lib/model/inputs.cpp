@@ -28,4 +28,16 @@ void FrameInputs::check() const {
               "FrameInputs.labels must be (", nv, ") int64");
 }
 
+bool same_inputs(const FrameInputs& a, const FrameInputs& b) {
+  auto same = [](const torch::Tensor& x, const torch::Tensor& y) {
+    if (x.defined() != y.defined()) return false;
+    if (!x.defined()) return true;
+    return x.scalar_type() == y.scalar_type() && x.device() == y.device() && x.sizes() == y.sizes() &&
+           torch::equal(x, y);
+  };
+  return a.num_tokens == b.num_tokens && same(a.ref_images, b.ref_images) && same(a.K, b.K) && same(a.R, b.R) &&
+         same(a.T, b.T) && same(a.vertices, b.vertices) && same(a.Rh, b.Rh) && same(a.Th, b.Th) && same(a.A, b.A) &&
+         same(a.canonical, b.canonical) && same(a.visibility, b.visibility) && same(a.labels, b.labels);
+}
+
 }  // namespace th::model

@@ -29,4 +29,8 @@ struct FrameInputs {
   void check() const;
 };
 
+// Whether two frames' inputs are the same values (dtypes, shapes and every element): a frame
+// prepared for one is the frame of the other.
+bool same_inputs(const FrameInputs& a, const FrameInputs& b);
+
 }  // namespace th::model

@@ -50,17 +50,32 @@ Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
   return out;
 }
 
+const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs) {
+  if (valid_ && model::same_inputs(inputs_, inputs)) {
+    ++reused_;
+    return cache_;
+  }
+  valid_ = false;
+  cache_ = model.prepare(inputs);
+  inputs_ = inputs;
+  valid_ = true;
+  ++prepared_;
+  return cache_;
+}
+
 ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
                          const data::Sample& sample, const model::FrameInputs& inputs,
-                         metrics::LpipsImpl* lpips, const torch::Device& device) {
+                         metrics::LpipsImpl* lpips, const torch::Device& device, FrameReuse* frames) {
   torch::NoGradGuard no_grad;
   const auto t0 = std::chrono::steady_clock::now();
-  const auto rendered = render_sample(model, rc, inputs, sample_rays(sample, device), false, false);
+  const auto rays = sample_rays(sample, device);
+  const auto result = frames ? model::render_rays(model, frames->prepare(model, inputs), rays, rc)
+                             : render_sample(model, rc, inputs, rays, false, false).result;
   ViewResult r;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  r.stats = rendered.result.stats;
-  const auto rgb = rendered.result.rgb.to(torch::kCPU, torch::kFloat32);
-  r.acc_max = rendered.result.acc.numel() ? rendered.result.acc.max().item<double>() : 0.0;
+  r.stats = result.stats;
+  const auto rgb = result.rgb.to(torch::kCPU, torch::kFloat32);
+  r.acc_max = result.acc.numel() ? result.acc.max().item<double>() : 0.0;
   r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (SPEC 6)
   const int64_t H = sample.target_image.size(0), W = sample.target_image.size(1);
   r.pred = scatter_image(rgb, sample.ray_pixel, H, W);

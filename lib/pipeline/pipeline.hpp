@@ -49,6 +49,22 @@ Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& render_
                        const model::FrameInputs& inputs, const render::Rays& rays, bool training,
                        bool cull_in_training, render::Profile* profile = nullptr);
 
+// The last prepared frame, handed out again while the frame inputs stay the same value for value
+// (several target views of one frame): the per-frame stages depend only on the inputs, so the
+// views render exactly as if each prepared its own.
+class FrameReuse {
+ public:
+  const model::FrameCache& prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs);
+  int64_t prepared() const { return prepared_; }
+  int64_t reused() const { return reused_; }
+
+ private:
+  model::FrameInputs inputs_;
+  model::FrameCache cache_;
+  bool valid_ = false;
+  int64_t prepared_ = 0, reused_ = 0;
+};
+
 // A test view rendered and scored with the protocol of SPEC 6: PSNR over the valid rays, SSIM
 // and LPIPS (when `lpips` is given; NaN otherwise) on the crop to the valid-ray rectangle.
 struct ViewResult {
@@ -58,9 +74,12 @@ struct ViewResult {
   torch::Tensor pred, gt;   // (H, W, 3) float32 CPU, black outside the valid rays
   render::RenderStats stats;
 };
+// With `frames`, the frame is prepared through it (reused from the previous view when the
+// inputs are the same); `seconds` then counts only what this view computed.
 ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& render_config,
                          const data::Sample& sample, const model::FrameInputs& inputs,
-                         metrics::LpipsImpl* lpips, const torch::Device& device);
+                         metrics::LpipsImpl* lpips, const torch::Device& device,
+                         FrameReuse* frames = nullptr);
 
 // Scatters per-ray colours into an image (H, W, 3), black elsewhere.
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,

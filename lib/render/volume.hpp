@@ -93,6 +93,7 @@ struct RenderStats {
   int64_t culled_points = 0;   // farther than the culling distance from the body
   int64_t density_points = 0;  // points whose density was evaluated
   int64_t color_points = 0;    // points whose colour was evaluated
+  int64_t terminated_points = 0;  // kept points skipped by early ray termination
   int64_t empty_rays = 0;      // rays without any kept point (output 0)
 };
 

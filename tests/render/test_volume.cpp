@@ -13,14 +13,15 @@ using namespace th;
 namespace {
 
 // A field whose density depends on the distance to the body and vanishes beyond 0.08 m, with a
-// position-dependent colour; it counts the points it evaluates.
+// position-dependent colour; it counts the points it evaluates. `scale`: density per metre
+// inside 0.08 m.
 class DistanceField : public render::RadianceField {
  public:
-  explicit DistanceField(torch::Tensor vertices) : v_(std::move(vertices)) {}
+  explicit DistanceField(torch::Tensor vertices, double scale = 200) : v_(std::move(vertices)), scale_(scale) {}
   torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) override {
     evaluated += pts.size(0);
     const auto d = std::get<0>(torch::cdist(pts, v_).min(1));
-    const auto sigma = 200.0 * (0.08 - d);  // negative beyond 0.08 m
+    const auto sigma = scale_ * (0.08 - d);  // negative beyond 0.08 m
     const auto rgb = torch::sin(5 * pts) + 0.1 * dirs;
     return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
   }
@@ -28,6 +29,7 @@ class DistanceField : public render::RadianceField {
 
  private:
   torch::Tensor v_;
+  double scale_;
 };
 
 }  // namespace
@@ -67,6 +69,7 @@ TEST_CASE("progressive rendering equals full rendering and reports skipped point
   RenderConfig rc;
   rc.samples = 64;
   rc.chunk_points = 1024;
+  rc.termination_transmittance = 0;  // every kept sample (early termination: the next test)
   const render::BodyDistance body(frame.inputs.vertices, rc.cull_distance);
 
   SECTION("a field with no density beyond the culling distance") {
@@ -118,5 +121,51 @@ TEST_CASE("progressive rendering equals full rendering and reports skipped point
     model::FrameField field2(*net, cache, rc2.chunk_points);
     const auto culled_full = render::VolumeRenderer(rc2).render(field2, rays, false, &body);
     CHECK((culled_full.rgb - prog.rgb).abs().max().item<double>() < 1e-5);
+  }
+}
+
+TEST_CASE("early ray termination moves no ray by more than its transmittance bound", "[render][progressive]") {
+  const auto frame = test::synthetic_frame();
+  const auto rays = test::target_rays(frame, 24);
+  RenderConfig rc;
+  rc.chunk_points = 1024;
+  const render::BodyDistance body(frame.inputs.vertices, rc.cull_distance);
+  for (int samples : {64, 16}) {
+    rc.samples = samples;
+    DistanceField field(frame.inputs.vertices, 1e4);  // opaque within a few millimetres
+    rc.termination_transmittance = 0;
+    const auto exact = render::render_progressive(field, body, rays, rc);
+    REQUIRE(exact.acc.max().item<double>() > 1 - 1e-4);
+    for (double tau : {1e-4, 1e-3, 1e-2}) {
+      CAPTURE(samples, tau);
+      rc.termination_transmittance = tau;
+      field.evaluated = 0;
+      const auto fast = render::render_progressive(field, body, rays, rc);
+      CHECK((fast.rgb - exact.rgb).abs().max().item<double>() <= tau);
+      CHECK((fast.acc - exact.acc).abs().max().item<double>() <= tau);
+      CHECK(fast.stats.culled_points == exact.stats.culled_points);
+      CHECK(fast.stats.empty_rays == exact.stats.empty_rays);
+      CHECK(fast.stats.terminated_points > 0);  // the body is opaque: rays stop inside it
+      CHECK(fast.stats.density_points + fast.stats.terminated_points == exact.stats.density_points);
+      CHECK(field.evaluated == fast.stats.density_points);
+      CHECK(exact.stats.terminated_points == 0);
+    }
+  }
+
+  SECTION("a field that never becomes opaque: nothing stops, the image is the exact one") {
+    class Faint : public render::RadianceField {
+     public:
+      torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor&) override {
+        return torch::cat({pts, torch::full({pts.size(0), 1}, 1e-3, pts.options())}, 1);
+      }
+    } faint;
+    rc.samples = 64;
+    rc.termination_transmittance = 0;
+    const auto exact = render::render_progressive(faint, body, rays, rc);
+    rc.termination_transmittance = 1e-4;
+    const auto fast = render::render_progressive(faint, body, rays, rc);
+    CHECK(fast.stats.terminated_points == 0);
+    CHECK(torch::equal(fast.rgb, exact.rgb));
+    CHECK(torch::equal(fast.acc, exact.acc));
   }
 }

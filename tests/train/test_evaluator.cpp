@@ -60,13 +60,13 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
   std::stringstream rows(csv_a);
   std::string line;
   std::getline(rows, line);
-  REQUIRE(line == "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points");
+  REQUIRE(line == "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points");
   int checked = 0;
   while (std::getline(rows, line)) {
     std::vector<std::string> f;
     std::stringstream cells(line);
     for (std::string cell; std::getline(cells, cell, ',');) f.push_back(cell);
-    REQUIRE(f.size() == 9);
+    REQUIRE(f.size() == 10);
     INFO(line);
     for (size_t i = 0; i < ds.size(); ++i) {
       const auto s = ds.load(i, 0);
@@ -83,6 +83,9 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
       CHECK(std::stoll(f[7]) == points);
       CHECK(std::abs(std::stoll(f[8]) - culled) <= borderline);
       CHECK(culled < points);
+      // Evaluated: at most the kept points (early termination skips some of them).
+      CHECK(std::stoll(f[9]) > 0);
+      CHECK(std::stoll(f[9]) <= std::stoll(f[7]) - std::stoll(f[8]));
       ++checked;
     }
   }

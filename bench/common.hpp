@@ -1,0 +1,90 @@
+#pragma once
+// What the benchmarks share: number formatting, wall time and peak memory of a section.
+// Memory: peak bytes of live LibTorch CPU tensors (c10's memory-reporting hook) and the resident
+// set growth (Linux VmHWM after resetting it through /proc/self/clear_refs).
+
+#include <torch/torch.h>
+
+#include <c10/core/Allocator.h>
+#include <c10/util/ThreadLocalDebugInfo.h>
+
+#include <chrono>
+#include <cstring>
+#include <fstream>
+#include <iomanip>
+#include <memory>
+#include <sstream>
+#include <iostream>
+#include <string>
+
+#include "core/torch_compat.hpp"
+
+namespace th::bench {
+
+using Clock = std::chrono::steady_clock;
+
+inline std::string fmt(double v, int prec = 1) {
+  std::ostringstream s;
+  s << std::fixed << std::setprecision(prec) << v;
+  return s.str();
+}
+
+inline double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+inline int64_t status_kb(const char* key) {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind(key, 0) == 0) return std::stoll(line.substr(std::strlen(key)));
+  return -1;
+}
+
+// Peak bytes of LibTorch CPU tensors allocated during a section and still alive, from c10's
+// memory-reporting hook (the allocator reports every allocation and free to the thread's
+// MemoryReportingInfoBase while one is installed).
+struct TensorMemoryHook : c10::MemoryReportingInfoBase {
+  int64_t base = -1, peak = 0;
+  void reportMemoryUsage(void*, int64_t size, th::compat::MemoryTotal total, th::compat::MemoryTotal,
+                         c10::Device device) override {
+    if (!device.is_cpu()) return;
+    const auto total_allocated = static_cast<int64_t>(total);
+    if (base < 0) base = total_allocated - size;
+    peak = std::max(peak, total_allocated - base);
+  }
+  bool memoryProfilingEnabled() const override { return true; }
+};
+
+// Peak memory of a section: tensor bytes (allocator hook) and the resident-set growth (VmHWM
+// after a reset through /proc/self/clear_refs, minus VmRSS before; a lower bound when freed
+// heap memory is reused).
+struct PeakMemory {
+  int64_t base_kb;
+  std::shared_ptr<TensorMemoryHook> hook = std::make_shared<TensorMemoryHook>();
+  c10::DebugInfoGuard guard{c10::DebugInfoKind::PROFILER_STATE, hook};
+  PeakMemory() {
+    std::ofstream("/proc/self/clear_refs") << "5";
+    base_kb = status_kb("VmRSS:");
+  }
+  double tensor_mib() const { return hook->peak / 1048576.0; }
+  double rss_mib() const { return (status_kb("VmHWM:") - base_kb) / 1024.0; }
+  std::string text() const { return fmt(tensor_mib(), 0) + " MiB tensors (RSS +" + fmt(rss_mib(), 0) + " MiB)"; }
+};
+
+// Lines printed and kept for the markdown file.
+struct Report {
+  std::ostringstream md;
+  void line(const std::string& s) {
+    std::cout << s << std::endl;
+    md << s << "\n";
+  }
+};
+
+// "1.23 0.98 0.75": the machine's 1, 5 and 15 minute load averages.
+inline std::string load_average() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
+}  // namespace th::bench

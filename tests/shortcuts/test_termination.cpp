@@ -1,0 +1,165 @@
+// The rendering shortcuts of issue 15 against the exact render, on the tiny network trained
+// until it has surfaces (CTest fixture `trained_tiny`, tests/configs/tiny_surface.yaml): a random
+// field has no surface to stop at, so these checks need a trained one.
+#include <catch2/catch.hpp>
+#include <torch/torch.h>
+
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "body/smpl.hpp"
+#include "core/config_io.hpp"
+#include "data/dataset.hpp"
+#include "eval/evaluator.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checkpoint.hpp"
+#include "pipeline/pipeline.hpp"
+#include "support/test_env.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+th::Config surface_config(std::vector<std::string> overrides = {}) {
+  const auto root = th::test::tiny_dataset();
+  overrides.insert(overrides.begin(),
+                   {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+                    "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
+                    "eval.setting=identity", "eval.save_images=false"});
+  return th::config::load<th::Config>("tests/configs/tiny_surface.yaml", overrides);
+}
+
+fs::path trained_checkpoint() {
+  const auto path = th::test::test_tmp_root() / "trained_tiny" / "checkpoints" / "latest.pt";
+  REQUIRE(fs::exists(path));  // made by the CTest fixture trained_tiny_checkpoint
+  return path;
+}
+
+struct Frames {
+  th::Config config;
+  th::model::TransHuman model{nullptr};
+  std::shared_ptr<const th::data::Dataset> dataset;
+  torch::Tensor canonical;
+  std::unique_ptr<th::pipeline::Tokens> tokens;
+
+  explicit Frames(th::Config c) : config(std::move(c)) {
+    model = th::model::TransHuman(config.model, config.render.cull_distance);
+    th::pipeline::load_weights(*model, trained_checkpoint());
+    model->eval();
+    const auto smpl = th::data::load_body_model(config.data);
+    dataset = std::make_shared<const th::data::Dataset>(config.data, "identity", th::data::Dataset::Mode::Test, smpl);
+    canonical = smpl->v_template;
+    tokens = std::make_unique<th::pipeline::Tokens>(config.model.grouping, smpl->v_template);
+  }
+  th::model::FrameInputs inputs(const th::data::Sample& s) {
+    return th::pipeline::frame_inputs(s, canonical, tokens->labels(s.body), torch::kCPU);
+  }
+};
+
+}  // namespace
+
+TEST_CASE("on a trained network, early ray termination stays within its bound of the exact render on every ray",
+          "[inference][termination]") {
+  torch::set_num_threads(1);
+  Frames f(surface_config({"data.ratio=0.5"}));
+  REQUIRE(f.config.render.termination_transmittance > 0);  // on by default
+  REQUIRE(f.config.render.termination_transmittance <= 1e-3);
+  // The default bound, and a loose one under which this briefly trained (still translucent)
+  // network does stop rays: the bound holds either way, and the loose one shows the skipping.
+  for (double tau : {f.config.render.termination_transmittance, 0.1}) {
+    for (int samples : {64, 16}) {
+      auto exact_rc = f.config.render, fast_rc = f.config.render;
+      exact_rc.samples = fast_rc.samples = samples;
+      exact_rc.termination_transmittance = 0;
+      fast_rc.termination_transmittance = tau;
+      const double tolerance = std::max(tau, 1e-3);  // issue 15: 1e-3 per ray at the default
+      int64_t kept = 0, terminated = 0;
+      for (size_t i = 0; i < std::min<size_t>(f.dataset->size(), 4); ++i) {
+        const auto s = f.dataset->load(i, 0);
+        const auto inputs = f.inputs(s);
+        torch::NoGradGuard no_grad;
+        const auto cache = f.model->prepare(inputs);
+        const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
+        const auto exact = th::model::render_rays(*f.model, cache, rays, exact_rc);
+        const auto fast = th::model::render_rays(*f.model, cache, rays, fast_rc);
+        CAPTURE(tau, samples, s.human, s.frame, s.target_view);
+        CHECK((fast.rgb - exact.rgb).abs().max().item<double>() <= tolerance);
+        CHECK((fast.acc - exact.acc).abs().max().item<double>() <= tolerance);
+        CHECK(fast.stats.density_points + fast.stats.terminated_points == exact.stats.density_points);
+        CHECK(exact.acc.max().item<double>() > 0.5);  // the trained body is visible
+        kept += exact.stats.density_points;
+        terminated += fast.stats.terminated_points;
+      }
+      CAPTURE(tau, samples, kept, terminated);
+      if (tau >= 0.1) CHECK(terminated * 20 > kept);  // at least 5% of the work skipped
+    }
+  }
+}
+
+TEST_CASE("a frame prepared once renders each of its views as preparing it for each does, bit for bit",
+          "[inference][termination]") {
+  torch::set_num_threads(1);
+  Frames f(surface_config());
+  th::pipeline::FrameReuse reuse;
+  int compared = 0;
+  for (size_t i = 0; i < std::min<size_t>(f.dataset->size(), 3); ++i) {
+    const auto s = f.dataset->load(i, 0);
+    const auto inputs = f.inputs(s);
+    const auto alone = th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr, torch::kCPU);
+    const auto shared = th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr, torch::kCPU, &reuse);
+    CAPTURE(s.human, s.frame, s.target_view);
+    CHECK(torch::equal(alone.pred, shared.pred));
+    CHECK(alone.psnr == shared.psnr);
+    ++compared;
+  }
+  CHECK(compared == 3);
+  CHECK(reuse.prepared() == 1);  // the first three test views are views of one frame
+  CHECK(reuse.reused() == 2);
+  // Other inputs (another frame's body) are prepared again.
+  auto s = f.dataset->load(0, 0);
+  auto inputs = f.inputs(s);
+  inputs.Th = inputs.Th + 1e-3;
+  reuse.prepare(*f.model, inputs);
+  CHECK(reuse.prepared() == 2);
+}
+
+TEST_CASE("evaluation with the default shortcuts scores every image as the exact settings do, to 0.01 dB",
+          "[inference][termination]") {
+  auto read_rows = [](const fs::path& csv) {
+    std::ifstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    std::map<std::string, std::vector<double>> rows;  // human,frame,view -> psnr, ssim, evaluated
+    while (std::getline(in, line)) {
+      std::vector<std::string> c;
+      std::stringstream cells(line);
+      for (std::string cell; std::getline(cells, cell, ',');) c.push_back(cell);
+      REQUIRE(c.size() == 10);
+      rows[c[0] + "," + c[1] + "," + c[2]] = {std::stod(c[3]), std::stod(c[4]), std::stod(c[9])};
+    }
+    return rows;
+  };
+  const fs::path dir = th::test::scratch_dir("termination_eval");
+  fs::create_directories(dir / "fast");
+  fs::create_directories(dir / "exact");
+  const std::vector<std::string> limit{"eval.limit=6", "render.samples=64", "threads=1"};
+  auto exact_overrides = limit;
+  exact_overrides.insert(exact_overrides.end(), {"render.termination_transmittance=0", "eval.reuse_frames=false"});
+  th::eval::evaluate(surface_config(limit), torch::kCPU, trained_checkpoint(), dir / "fast");
+  th::eval::evaluate(surface_config(exact_overrides), torch::kCPU, trained_checkpoint(), dir / "exact");
+  const auto fast = read_rows(dir / "fast" / "per_image.csv"), exact = read_rows(dir / "exact" / "per_image.csv");
+  REQUIRE(fast.size() == 6);
+  REQUIRE(exact.size() == 6);
+  double fast_points = 0, exact_points = 0;
+  for (const auto& [key, e] : exact) {
+    CAPTURE(key);
+    REQUIRE(fast.count(key));
+    const auto& q = fast.at(key);
+    CHECK(std::abs(q[0] - e[0]) <= 0.01);  // PSNR, dB
+    CHECK(std::abs(q[1] - e[1]) <= 1e-3);  // SSIM
+    fast_points += q[2];
+    exact_points += e[2];
+  }
+  CHECK(fast_points <= exact_points);  // fewer where rays stop (none may, on a translucent network)
+}
