@@ -6,8 +6,8 @@
 //   orbit  36 orbit views of one frame at that size (transhuman-render's path);
 //   train  seconds per training step at the config (after a warm-up);
 //   eval   the evaluation of the config's setting, every image (transhuman-eval's path).
-// "exact": render.termination_transmittance=0, eval.reuse_frames=false, i.e. what main did
-// before these shortcuts; "default": the config as it is. The figures are appended, with the
+// "exact": render.termination_transmittance=0, eval.reuse_frames=false,
+// render.train_recompute=always, i.e. what main did before these shortcuts; "default": the config as it is. The figures are appended, with the
 // date, the machine and its load, to --out.
 //   transhuman-bench-speed --config configs/demo.yaml --checkpoint runs/demo/checkpoints/latest.pt
 //                          [--out bench/results/speed.md] [--sections view orbit train eval]
@@ -19,6 +19,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
+#include <iomanip>
 #include <iostream>
 #include <map>
 #include <thread>
@@ -44,7 +45,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::vector<std::string> kExact{"render.termination_transmittance=0", "eval.reuse_frames=false"};
+const std::vector<std::string> kExact{"render.termination_transmittance=0", "eval.reuse_frames=false",
+                                      "render.train_recompute=always"};
 
 struct Setup {
   fs::path config, checkpoint, scratch;
@@ -57,10 +59,21 @@ struct Setup {
   }
 };
 
-std::string ratio(double slow, double fast) { return fmt(slow / std::max(fast, 1e-9), 2) + "x"; }
+// One path of one section runs in a child process of its own (the allocator policy is
+// process-wide: the exact path keeps glibc's defaults, as main did). It writes its rows as
+// "key<TAB>seconds<TAB>markdown cells" to `rows`; the parent pairs the exact and default rows
+// of each key and adds the speed-up.
+struct Rows {
+  std::ofstream out;
+  void add(const std::string& key, double seconds, const std::string& cells) {
+    out << key << '\t' << seconds << '\t' << cells << std::endl;
+  }
+};
 
-void view_section(const Setup& setup, bench::Report& r) {
-  const Config base = setup.load({"data.ratio=1"});
+const char* path_name(bool fast) { return fast ? "default" : "exact"; }
+
+void view_section(const Setup& setup, bool fast, Rows& rows, const std::vector<int>& view_samples) {
+  const Config base = setup.load({"data.ratio=1"}, !fast);
   const auto smpl = data::load_body_model(base.data);
   const data::Dataset dataset(base.data, base.eval.setting, data::Dataset::Mode::Test, smpl);
   model::TransHuman net(base.model, base.render.cull_distance);
@@ -71,70 +84,72 @@ void view_section(const Setup& setup, bench::Report& r) {
   const auto inputs = pipeline::frame_inputs(sample, smpl->v_template, tokens.labels(sample.body), torch::kCPU);
   const auto rays = pipeline::sample_rays(sample, torch::kCPU);
   torch::NoGradGuard no_grad;
+  render::Profile prepare_profile;
+  net->set_profile(&prepare_profile);
+  double prepare_mib = 0;
   auto t0 = Clock::now();
-  const auto cache = net->prepare(inputs);
+  const auto cache = [&] {
+    bench::PeakMemory mem;
+    auto c = net->prepare(inputs);
+    prepare_mib = mem.tensor_mib();
+    return c;
+  }();
   const double prepare = seconds_since(t0);
-  r.line("## One test view: " + sample.human + " frame " + std::to_string(sample.frame) + " view " +
-         std::to_string(sample.target_view) + ", " + std::to_string(sample.target_image.size(1)) + "x" +
-         std::to_string(sample.target_image.size(0)) + ", " + std::to_string(rays.size()) + " in-box rays");
-  r.line("");
-  r.line("Frame preparation (encoder, TransHE, readouts; once per frame): " + fmt(prepare, 2) + " s.");
-  r.line("");
-  r.line("| samples | path | render s | view s (with preparation) | points evaluated | colour points | skipped by "
-         "termination | peak MiB tensors | max abs rgb diff | max abs acc diff | speed-up |");
-  r.line("|---|---|---|---|---|---|---|---|---|---|---|");
-  for (int samples : {64, 16}) {
-    render::RenderResult exact;
-    double exact_sec = 0;
-    for (bool fast : {false, true}) {
-      auto rc = base.render;
-      rc.samples = samples;
-      if (!fast) rc.termination_transmittance = 0;
-      bench::PeakMemory mem;
-      t0 = Clock::now();
-      const auto img = model::render_rays(*net, cache, rays, rc);
-      const double sec = seconds_since(t0);
-      if (!fast) {
-        exact = img;
-        exact_sec = sec;
-      }
-      const auto& st = img.stats;
-      const double drgb = (img.rgb - exact.rgb).abs().max().item<double>();
-      const double dacc = (img.acc - exact.acc).abs().max().item<double>();
-      r.line("| " + std::to_string(samples) + " | " + (fast ? "default" : "exact") + " | " + fmt(sec, 2) + " | " +
-             fmt(sec + prepare, 2) + " | " + std::to_string(st.density_points) + " | " +
-             std::to_string(st.color_points) + " | " + std::to_string(st.terminated_points) + " | " +
-             fmt(mem.tensor_mib(), 0) + " | " + fmt(drgb * 1e3, 3) + "e-3 | " + fmt(dacc * 1e3, 3) + "e-3 | " +
-             ratio(exact_sec, sec) + " |");
-    }
-  }
-  r.line("");
-}
-
-void orbit_section(const Setup& setup, bench::Report& r, int views) {
-  r.line("## Orbit: " + std::to_string(views) + " views of one frame at data.ratio 1 (transhuman-render)");
-  r.line("");
-  r.line("| path | seconds | seconds per view | speed-up |");
-  r.line("|---|---|---|---|");
-  double exact_sec = 0;
-  for (bool fast : {false, true}) {
-    const Config c = setup.load({"data.ratio=1"}, !fast);
-    const inference::Session session(c, torch::kCPU, setup.checkpoint);
-    inference::VideoRequest request;
-    request.orbit_views = views;
-    request.force = true;
-    request.contact_sheet_frames = 0;
-    const auto t0 = Clock::now();
-    const auto summary = inference::render_video(session, request, setup.scratch / (fast ? "orbit_fast" : "orbit_exact"));
+  net->set_profile(nullptr);
+  std::string prepare_stages;
+  for (const auto& [stage, seconds] : prepare_profile.seconds) prepare_stages += ", " + stage + " " + fmt(seconds, 2);
+  rows.add("what", 0, sample.human + " frame " + std::to_string(sample.frame) + " view " +
+                          std::to_string(sample.target_view) + ", " + std::to_string(sample.target_image.size(1)) +
+                          "x" + std::to_string(sample.target_image.size(0)) + ", " + std::to_string(rays.size()) +
+                          " in-box rays; frame preparation, " + path_name(fast) + " path: " + fmt(prepare, 2) + " s" +
+                          prepare_stages + ", peak " + fmt(prepare_mib, 0) + " MiB tensors, of which " +
+                          fmt(cache.nbytes() / 1048576.0, 0) + " MiB stay in the frame cache");
+  for (int samples : view_samples) {
+    auto rc = base.render;
+    rc.samples = samples;
+    render::Profile profile;
+    net->set_profile(&profile);
+    bench::PeakMemory mem;
+    t0 = Clock::now();
+    const auto img = model::render_rays(*net, cache, rays, rc, &profile);
     const double sec = seconds_since(t0);
-    if (!fast) exact_sec = sec;
-    r.line(std::string("| ") + (fast ? "default" : "exact") + " | " + fmt(sec, 1) + " | " +
-           fmt(sec / std::max(summary.rendered, 1), 2) + " | " + ratio(exact_sec, sec) + " |");
+    net->set_profile(nullptr);
+    const fs::path exact_file = setup.scratch / ("view_exact_" + std::to_string(samples) + ".pt");
+    std::string diff = "- | -";
+    if (!fast) {
+      torch::save(std::vector<torch::Tensor>{img.rgb, img.acc}, exact_file.string());
+    } else {
+      std::vector<torch::Tensor> exact;
+      torch::load(exact, exact_file.string());
+      diff = fmt((img.rgb - exact[0]).abs().max().item<double>() * 1e3, 3) + "e-3 | " +
+             fmt((img.acc - exact[1]).abs().max().item<double>() * 1e3, 3) + "e-3";
+    }
+    const auto& st = img.stats;
+    std::string stages;
+    for (const auto& [stage, seconds] : profile.seconds) stages += stage + " " + fmt(seconds, 2) + ", ";
+    rows.add(std::to_string(samples), sec + prepare,
+             std::to_string(samples) + " | " + path_name(fast) + " | " + fmt(sec, 2) + " | " + fmt(prepare, 2) + " | " +
+                 fmt(sec + prepare, 2) + " | " + std::to_string(st.density_points) + " | " +
+                 std::to_string(st.color_points) + " | " + std::to_string(st.terminated_points) + " | " +
+                 fmt(mem.tensor_mib(), 0) + " | " + diff + " | " + stages.substr(0, stages.size() - 2));
   }
-  r.line("");
 }
 
-// Mean time_per_step of the last metrics line (steps after the first `steps` of warm-up).
+void orbit_section(const Setup& setup, bool fast, Rows& rows, int views) {
+  const Config c = setup.load({"data.ratio=1"}, !fast);
+  const inference::Session session(c, torch::kCPU, setup.checkpoint);
+  inference::VideoRequest request;
+  request.orbit_views = views;
+  request.force = true;
+  request.contact_sheet_frames = 0;
+  const auto t0 = Clock::now();
+  const auto summary = inference::render_video(session, request, setup.scratch / (std::string("orbit_") + path_name(fast)));
+  const double sec = seconds_since(t0);
+  rows.add("orbit", sec, std::string(path_name(fast)) + " | " + std::to_string(summary.rendered) + " | " + fmt(sec, 1) +
+                             " | " + fmt(sec / std::max(summary.rendered, 1), 2));
+}
+
+// Mean time_per_step of the last metrics line (the steps after the warm-up).
 double step_seconds(const fs::path& metrics) {
   std::ifstream in(metrics);
   std::string line, last;
@@ -145,55 +160,113 @@ double step_seconds(const fs::path& metrics) {
   return std::stod(last.substr(at + 17));
 }
 
-void train_section(const Setup& setup, bench::Report& r, int steps) {
-  r.line("## Training steps at the config (" + std::to_string(steps) + " steps after " + std::to_string(steps) +
-         " of warm-up)");
-  r.line("");
-  r.line("| path | seconds per step | steps per second | speed-up |");
-  r.line("|---|---|---|---|");
-  const std::vector<std::string> quiet{"train.log_every_steps=" + std::to_string(steps), "train.val_views=0",
-                                       "train.save_every_epochs=0"};
-  const Config c = setup.load(quiet);
-  const fs::path dir = setup.scratch / "train";
+std::vector<torch::Tensor> weights_of(const Config& c, const fs::path& checkpoint) {
+  model::TransHuman net(c.model, c.render.cull_distance);
+  pipeline::load_weights(*net, checkpoint);
+  std::vector<torch::Tensor> out;
+  for (const auto& p : net->parameters()) out.push_back(p.detach().clone());
+  return out;
+}
+
+void train_section(const Setup& setup, bool fast, Rows& rows, int steps) {
+  const Config c = setup.load({"train.log_every_steps=" + std::to_string(steps), "train.val_views=0",
+                               "train.save_every_epochs=0"},
+                              !fast);
+  const fs::path dir = setup.scratch / (std::string("train_") + path_name(fast));
   fs::remove_all(dir);
   train::train(c, torch::kCPU, {dir, false, 2 * steps});
   const double sec = step_seconds(dir / "metrics.jsonl");
-  r.line("| default | " + fmt(sec, 3) + " | " + fmt(1 / sec, 3) + " | 1.00x |");
-  r.line("");
+  std::string same = "-";
+  if (fast) {
+    const auto a = weights_of(c, dir / "checkpoints" / "latest.pt");
+    const auto b = weights_of(c, setup.scratch / "train_exact" / "checkpoints" / "latest.pt");
+    size_t differing = 0;
+    for (size_t i = 0; i < a.size(); ++i) differing += !torch::equal(a[i], b[i]);
+    same = differing == 0 ? "identical to exact" : std::to_string(differing) + " tensors differ";
+  }
+  rows.add("train", sec, std::string(path_name(fast)) + " | " + fmt(sec, 3) + " | " + fmt(1 / sec, 3) + " | " + same);
 }
 
-void eval_section(const Setup& setup, bench::Report& r) {
-  const Config probe = setup.load();
-  r.line("## Evaluation: setting " + probe.eval.setting + " at the config (transhuman-eval)");
-  r.line("");
-  r.line("| path | images | seconds | seconds per image | PSNR | SSIM | points evaluated | largest per-image PSNR "
-         "difference | speed-up |");
-  r.line("|---|---|---|---|---|---|---|---|---|");
-  eval::EvalSummary exact;
-  double exact_sec = 0;
-  for (bool fast : {false, true}) {
-    const Config c = setup.load({"eval.save_images=false"}, !fast);
-    const fs::path dir = setup.scratch / (fast ? "eval_fast" : "eval_exact");
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-    const auto t0 = Clock::now();
-    const auto s = eval::evaluate(c, torch::kCPU, setup.checkpoint, dir);
-    const double sec = seconds_since(t0);
-    if (!fast) {
-      exact = s;
-      exact_sec = sec;
+void eval_section(const Setup& setup, bool fast, Rows& rows) {
+  const Config c = setup.load({"eval.save_images=false"}, !fast);
+  const fs::path dir = setup.scratch / (std::string("eval_") + path_name(fast));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const auto t0 = Clock::now();
+  const auto s = eval::evaluate(c, torch::kCPU, setup.checkpoint, dir);
+  const double sec = seconds_since(t0);
+  const fs::path psnr_file = setup.scratch / "eval_exact_psnr.txt";
+  int64_t points = 0;
+  for (const auto& i : s.per_image) points += i.evaluated_points;
+  std::string worst = "-";
+  if (!fast) {
+    std::ofstream f(psnr_file);
+    for (const auto& i : s.per_image) f << std::setprecision(17) << i.psnr << '\n';
+  } else {
+    std::ifstream f(psnr_file);
+    double w = 0, v = 0;
+    for (const auto& i : s.per_image) {
+      if (!(f >> v)) throw std::runtime_error("fewer exact images than default ones in " + psnr_file.string());
+      w = std::max(w, std::abs(i.psnr - v));
     }
-    int64_t points = 0;
-    double worst = 0;
-    for (size_t i = 0; i < s.per_image.size(); ++i) {
-      points += s.per_image[i].evaluated_points;
-      worst = std::max(worst, std::abs(s.per_image[i].psnr - exact.per_image[i].psnr));
-    }
-    r.line(std::string("| ") + (fast ? "default" : "exact") + " | " + std::to_string(s.images) + " | " + fmt(sec, 1) +
-           " | " + fmt(sec / std::max(s.images, 1), 3) + " | " + fmt(s.psnr, 3) + " | " + fmt(s.ssim, 4) + " | " +
-           std::to_string(points) + " | " + fmt(worst, 4) + " dB | " + ratio(exact_sec, sec) + " |");
+    worst = fmt(w, 4) + " dB";
   }
-  r.line("");
+  rows.add("eval", sec, std::string(path_name(fast)) + " | " + std::to_string(s.images) + " | " + fmt(sec, 1) + " | " +
+                            fmt(sec / std::max(s.images, 1), 3) + " | " + fmt(s.psnr, 3) + " | " + fmt(s.ssim, 4) +
+                            " | " + std::to_string(points) + " | " + worst);
+}
+
+struct Row {
+  std::string key;
+  double seconds;
+  std::string cells;
+};
+
+std::vector<Row> read_rows(const fs::path& file) {
+  std::ifstream in(file);
+  std::vector<Row> out;
+  std::string line;
+  while (std::getline(in, line)) {
+    const auto a = line.find('\t'), b = line.find('\t', a + 1);
+    if (a == std::string::npos || b == std::string::npos) continue;
+    out.push_back({line.substr(0, a), std::stod(line.substr(a + 1, b - a - 1)), line.substr(b + 1)});
+  }
+  return out;
+}
+
+// Header lines and table heads of each section.
+void section_head(bench::Report& r, const std::string& section, const Setup& setup, int orbit_views, int steps) {
+  if (section == "view") {
+    r.line("## One test view at data.ratio 1");
+    r.line("");
+    r.line("| samples | path | render s | frame preparation s | view s | points evaluated | colour points | skipped "
+           "by termination | peak MiB tensors (render, frame cache held) | max abs rgb diff | max abs acc diff | seconds per stage | "
+           "speed-up (view) |");
+    r.line("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+  } else if (section == "orbit") {
+    r.line("## Orbit: " + std::to_string(orbit_views) + " views of one frame at data.ratio 1 (transhuman-render)");
+    r.line("");
+    r.line("| path | views | seconds | seconds per view | speed-up |");
+    r.line("|---|---|---|---|---|");
+  } else if (section == "train") {
+    r.line("## Training at the config: " + std::to_string(steps) + " steps measured after " + std::to_string(steps) +
+           " of warm-up, from the same initial weights");
+    r.line("");
+    r.line("| path | seconds per step | steps per second | weights after the steps | speed-up |");
+    r.line("|---|---|---|---|---|");
+  } else if (section == "eval") {
+    r.line("## Evaluation of the config's setting (transhuman-eval, every image)");
+    r.line("");
+    r.line("| path | images | seconds | seconds per image | PSNR | SSIM | points evaluated | largest per-image PSNR "
+           "difference | speed-up |");
+    r.line("|---|---|---|---|---|---|---|---|---|");
+  }
+}
+
+std::string quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
 }
 
 }  // namespace
@@ -202,24 +275,47 @@ int main(int argc, char** argv) {
   CLI::App cli{"TransHuman speed benchmark: exact and default paths side by side (issue 15)"};
   Setup setup;
   int threads = 0, orbit_views = 36, train_steps = 10;
-  fs::path out = "bench/results/speed.md";
+  fs::path out = "bench/results/speed.md", rows_file;
   std::vector<std::string> sections{"view", "orbit", "train", "eval"};
+  std::vector<int> view_samples{64, 16};
+  std::string child_path;
   cli.add_option("--config", setup.config, "the config (the checkpoint's)")->required();
   cli.add_option("--checkpoint", setup.checkpoint, "a trained checkpoint")->required();
-  cli.add_option("--out", out, "append the figures to this markdown file");
+  cli.add_option("--out", out, "append the figures to this markdown file (empty: print only)");
   cli.add_option("--sections", sections, "which parts to run: view orbit train eval");
+  cli.add_option("--view-samples", view_samples, "samples per ray of the view section");
   cli.add_option("--orbit-views", orbit_views, "orbit views");
   cli.add_option("--train-steps", train_steps, "training steps measured (after as many of warm-up)");
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
   cli.add_option("--scratch", setup.scratch, "scratch folder (default: a temporary one, removed at the end)");
+  cli.add_option("--child", child_path, "(internal) run one path of the sections: exact or default");
+  cli.add_option("--rows", rows_file, "(internal) where a child writes its rows");
   cli.add_option("overrides", setup.overrides, "config overrides key=value");
   CLI11_PARSE(cli, argc, argv);
+
+  if (!child_path.empty()) {  // one path, in a process of its own
+    const bool fast = child_path == "default";
+    if (fast) runtime::keep_freed_memory();  // as the apps do now; the exact path: glibc defaults
+    runtime::set_threads(threads);
+    Rows rows{std::ofstream(rows_file)};
+    try {
+      for (const auto& s : sections) {
+        if (s == "view") view_section(setup, fast, rows, view_samples);
+        else if (s == "orbit") orbit_section(setup, fast, rows, orbit_views);
+        else if (s == "train") train_section(setup, fast, rows, train_steps);
+        else if (s == "eval") eval_section(setup, fast, rows);
+        else throw std::runtime_error("unknown section '" + s + "' (view, orbit, train, eval)");
+      }
+    } catch (const std::exception& e) {
+      std::cerr << "transhuman-bench-speed (" << child_path << "): error: " << e.what() << std::endl;
+      return 1;
+    }
+    return 0;
+  }
+
   const bool own_scratch = setup.scratch.empty();
   if (own_scratch) setup.scratch = fs::temp_directory_path() / ("transhuman-bench-speed-" + std::to_string(::getpid()));
   fs::create_directories(setup.scratch);
-  setup.overrides.push_back("threads=" + std::to_string(threads));
-  const int nthreads = runtime::set_threads(threads);
-
   bench::Report r;
   const std::time_t now = std::time(nullptr);
   char date[32];
@@ -227,24 +323,50 @@ int main(int argc, char** argv) {
   r.line("# Speed: exact and default paths (" + std::string(date) + ")");
   r.line("");
   r.line("Config " + setup.config.string() + ", checkpoint " + setup.checkpoint.string() + "; LibTorch " +
-         std::string(TORCH_VERSION) + ", " + std::to_string(nthreads) + " threads, BLAS " + runtime::detect_blas().name +
-         "; " + std::to_string(std::thread::hardware_concurrency()) + " cores, load average at start " +
-         bench::load_average() + ".");
-  r.line("Exact: " + std::string("render.termination_transmittance=0, eval.reuse_frames=false") +
-         " (main before issue 15). Default: the config as it is.");
+         std::string(TORCH_VERSION) + ", BLAS " + runtime::detect_blas().name + ", threads " +
+         (threads > 0 ? std::to_string(threads) : "one per core") + "; " +
+         std::to_string(std::thread::hardware_concurrency()) + " cores, load average at start " + bench::load_average() +
+         ".");
+  std::string exact;
+  for (const auto& o : kExact) exact += (exact.empty() ? "" : ", ") + o;
+  r.line("Exact: " + exact + ", glibc malloc defaults: main before issue 15. Default: the config as it is, "
+         "malloc keeping freed memory (as the apps now do). Each path runs in a process of its own.");
   r.line("");
-  try {
-    for (const auto& s : sections) {
-      if (s == "view") view_section(setup, r);
-      else if (s == "orbit") orbit_section(setup, r, orbit_views);
-      else if (s == "train") train_section(setup, r, train_steps);
-      else if (s == "eval") eval_section(setup, r);
-      else throw std::runtime_error("unknown section '" + s + "' (view, orbit, train, eval)");
+  for (const auto& section : sections) {
+    std::map<std::string, std::vector<Row>> by_path;
+    for (const char* path : {"exact", "default"}) {
+      const fs::path file = setup.scratch / (section + "_" + path + ".rows");
+      std::string cmd = quote(fs::read_symlink("/proc/self/exe").string()) + " --child " + path + " --rows " +
+                        quote(file.string()) + " --config " + quote(setup.config.string()) + " --checkpoint " +
+                        quote(setup.checkpoint.string()) + " --scratch " + quote(setup.scratch.string()) +
+                        " --sections " + section + " --orbit-views " + std::to_string(orbit_views) +
+                        " --train-steps " + std::to_string(train_steps) + " --threads " + std::to_string(threads) +
+                        " --view-samples";
+      for (int v : view_samples) cmd += " " + std::to_string(v);
+      cmd += " --";
+      for (const auto& o : setup.overrides) cmd += " " + quote(o);
+      std::cout << "[" << section << ", " << path << "]" << std::endl;
+      if (std::system(cmd.c_str()) != 0) {
+        std::cerr << "transhuman-bench-speed: the " << path << " run of section " << section << " failed" << std::endl;
+        if (own_scratch) fs::remove_all(setup.scratch);
+        return 1;
+      }
+      by_path[path] = read_rows(file);
     }
-  } catch (const std::exception& e) {
-    std::cerr << "transhuman-bench-speed: error: " << e.what() << std::endl;
-    if (own_scratch) fs::remove_all(setup.scratch);
-    return 1;
+    section_head(r, section, setup, orbit_views, train_steps);
+    std::map<std::string, double> exact_seconds;
+    for (const auto& row : by_path["exact"]) exact_seconds[row.key] = row.seconds;
+    std::string what;
+    for (const auto& path : {"exact", "default"})
+      for (const auto& row : by_path[path]) {
+        if (row.key == "what") {
+          what += (what.empty() ? "" : "; ") + row.cells;
+          continue;
+        }
+        r.line("| " + row.cells + " | " + fmt(exact_seconds[row.key] / std::max(row.seconds, 1e-9), 2) + "x |");
+      }
+    if (!what.empty()) r.line("\nThe view: " + what + ".");
+    r.line("");
   }
   r.line("Load average at the end: " + bench::load_average() + ".");
   r.line("");

@@ -134,6 +134,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   spdlog::info("{} | config {} | {}", app_name, o.config,
                ctx.run_dir.empty() ? "no run directory" : "run directory " + ctx.run_dir.string());
   runtime::log_blas();
+  if (!runtime::keep_freed_memory()) spdlog::debug("malloc: glibc defaults (TH_MALLOC=system)");
   const int threads = runtime::set_threads(ctx.config.threads);
   ctx.device = runtime::select_device(ctx.config.device);
   spdlog::info("device {} | {} threads", ctx.device.str(), threads);

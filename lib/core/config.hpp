@@ -120,6 +120,12 @@ struct RenderConfig {
   double termination_transmittance = 1e-4;
   // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
   int64_t train_chunk_points = 4096;
+  // Training: "always" evaluates the per-point network without a graph and recomputes each chunk
+  // in the backward pass (memory of one chunk); "never" keeps every chunk's graph from the
+  // forward pass (one forward less; memory grows with the points); "auto" keeps them up to
+  // model::kKeepGraphPoints points per field call (the demo's batch) and recomputes beyond.
+  // The same arithmetic in the same order either way: the same weights, bit for bit.
+  std::string train_recompute = "auto";
 };
 
 // ---- training (SPEC 5) -------------------------------------------------------------------
@@ -264,6 +270,7 @@ template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("chunk_points", c.chunk_points);
   v("termination_transmittance", c.termination_transmittance);
   v("train_chunk_points", c.train_chunk_points);
+  v.choice("train_recompute", c.train_recompute, {"auto", "always", "never"});
 }
 template <class V> void visit_fields(V& v, TrainConfig& c) {
   v("epochs", c.epochs);

@@ -1,11 +1,15 @@
 #include "core/runtime.hpp"
 
 #include <dlfcn.h>
+#include <malloc.h>
 #include <spdlog/spdlog.h>
 #include <torch/cuda.h>
 #include <torch/utils.h>
 
 #include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
 #include <filesystem>
 #include <thread>
 #include <fstream>
@@ -34,6 +38,16 @@ F find_symbol(const char* name) {
 }
 
 }  // namespace
+
+bool keep_freed_memory() {
+  const char* mode = std::getenv("TH_MALLOC");
+  if (mode && std::strcmp(mode, "system") == 0) return false;
+#ifdef __GLIBC__
+  return mallopt(M_MMAP_MAX, 0) == 1 && mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()) == 1;
+#else
+  return false;
+#endif
+}
 
 BlasInfo detect_blas() {
   BlasInfo info;

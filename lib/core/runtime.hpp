@@ -19,6 +19,13 @@ BlasInfo detect_blas();
 // Logs the BLAS at info level, or a loud warning for the slow reference BLAS.
 void log_blas();
 
+// glibc malloc set to serve large blocks from the heap and keep freed memory: the per-chunk
+// tensors of the per-point network are tens of MB, and by default glibc maps and unmaps each
+// one (every page of it faulted in again, each chunk: the page faults then cost as much as the
+// arithmetic; transhuman-bench-speed measures it). The arithmetic is unchanged. TH_MALLOC=system
+// keeps glibc's defaults. Returns whether it was applied.
+bool keep_freed_memory();
+
 // "auto" -> CUDA when the linked LibTorch has it and a GPU is present, else CPU.
 // "cuda" without CUDA is a th::Error.
 torch::Device select_device(const std::string& requested);

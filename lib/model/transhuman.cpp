@@ -4,6 +4,7 @@
 #include <torch/csrc/autograd/custom_function.h>
 
 #include <algorithm>
+#include <limits>
 
 #include "core/error.hpp"
 #include "model/pretrained.hpp"
@@ -196,10 +197,42 @@ torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, con
 
 namespace {
 
+// The frame's tensors that carry a gradient, as leaves of a graph of their own (the same
+// tensors, in the same order, as the inputs of CheckpointedChunks::forward); tables read by
+// weighted_gather get a gradient sink on CPU.
+struct LeafFrame {
+  FrameCache cache;
+  std::vector<torch::Tensor> leaves, sinks;
+
+  explicit LeafFrame(const FrameCache& frame) : cache(frame) {
+    cache.visit([&](torch::Tensor& t, torch::Tensor* sink) {
+      if (!t.defined() || !t.requires_grad()) return;
+      t = t.detach().requires_grad_(true);
+      leaves.push_back(t);
+      sinks.emplace_back();
+      if (sink && t.device().is_cpu()) sinks.back() = *sink = torch::zeros_like(t);
+    });
+  }
+  // The gradients of the leaves (sinks added), one per leaf.
+  torch::autograd::variable_list grads() const {
+    torch::autograd::variable_list out;
+    for (size_t i = 0; i < leaves.size(); ++i) {
+      auto g = leaves[i].grad();
+      if (sinks[i].defined()) g = g.defined() ? g + sinks[i] : sinks[i];
+      out.push_back(g.defined() ? g : torch::zeros_like(leaves[i]));
+    }
+    return out;
+  }
+};
+
 struct ChunkJob : torch::CustomClassHolder {
   TransHumanImpl* model = nullptr;
   FrameCache cache;
   int64_t chunk = 0;
+  bool keep_graph = false;
+  // keep_graph: the leaf frame and each chunk's output, with its graph, from the forward pass.
+  std::unique_ptr<LeafFrame> kept;
+  std::vector<torch::Tensor> outputs;
 };
 
 torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, const torch::Tensor& pts,
@@ -219,14 +252,26 @@ torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, con
 // tensors, accumulates their gradients and hands them to the outer graph (the encoder, ViT and
 // the folded weights), while parameters used per point accumulate into .grad directly.
 // Colour is evaluated only where sigma_raw > 0: elsewhere the compositing weight is 0, so
-// neither the image nor any gradient changes.
+// neither the image nor any gradient changes. With job->keep_graph the forward pass builds the
+// chunks' graphs on the leaf frame already and the backward pass only runs them, chunk by chunk
+// in the same order: the same gradients, one forward less.
 struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, torch::TensorList frame,
                                const torch::Tensor& pts, const torch::Tensor& dirs,
                                c10::intrusive_ptr<ChunkJob> job) {
     ctx->save_for_backward({pts, dirs});
     ctx->saved_data["job"] = c10::IValue::make_capsule(job);
-    return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
+    if (!job->keep_graph) return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
+    torch::AutoGradMode enable(true);
+    job->kept = std::make_unique<LeafFrame>(job->cache);
+    const int64_t n = pts.size(0);
+    std::vector<torch::Tensor> values;
+    for (int64_t b = 0; b < n; b += job->chunk) {
+      const int64_t e = std::min(n, b + job->chunk);
+      job->outputs.push_back(job->model->forward_density_first(job->kept->cache, pts.slice(0, b, e), dirs.slice(0, b, e)));
+      values.push_back(job->outputs.back().detach());
+    }
+    return values.size() == 1 ? values.front() : torch::cat(values);
   }
 
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
@@ -235,30 +280,27 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     const auto saved = ctx->get_saved_variables();
     const auto &pts = saved[0], &dirs = saved[1];
     torch::AutoGradMode enable(true);
-    // The frame's tensors that carry a gradient become leaves of this recomputation (the same
-    // tensors, in the same order, as the inputs of forward); tables read by weighted_gather get
-    // a gradient sink on CPU.
-    FrameCache cache = job->cache;
-    std::vector<torch::Tensor> leaves, sinks;
-    cache.visit([&](torch::Tensor& t, torch::Tensor* sink) {
-      if (!t.defined() || !t.requires_grad()) return;
-      t = t.detach().requires_grad_(true);
-      leaves.push_back(t);
-      sinks.emplace_back();
-      if (sink && t.device().is_cpu()) sinks.back() = *sink = torch::zeros_like(t);
-    });
     const auto& g = grad_out[0];
     const int64_t n = pts.size(0);
-    for (int64_t b = 0; b < n; b += job->chunk) {
-      const int64_t e = std::min(n, b + job->chunk);
-      const auto raw = job->model->forward_density_first(cache, pts.slice(0, b, e), dirs.slice(0, b, e));
-      torch::autograd::backward({raw}, {g.slice(0, b, e)});
-    }
     torch::autograd::variable_list grads;
-    for (size_t i = 0; i < leaves.size(); ++i) {
-      auto g = leaves[i].grad();
-      if (sinks[i].defined()) g = g.defined() ? g + sinks[i] : sinks[i];
-      grads.push_back(g.defined() ? g : torch::zeros_like(leaves[i]));
+    if (job->keep_graph) {
+      TORCH_CHECK(job->kept && job->outputs.size() == size_t((n + job->chunk - 1) / job->chunk),
+                  "the kept per-point graphs were already used (a second backward pass)");
+      for (size_t i = 0; i < job->outputs.size(); ++i) {
+        const int64_t b = int64_t(i) * job->chunk;
+        torch::autograd::backward({job->outputs[i]}, {g.slice(0, b, std::min(n, b + job->chunk))});
+      }
+      grads = job->kept->grads();
+      job->outputs.clear();
+      job->kept.reset();
+    } else {
+      LeafFrame leaf(job->cache);
+      for (int64_t b = 0; b < n; b += job->chunk) {
+        const int64_t e = std::min(n, b + job->chunk);
+        const auto raw = job->model->forward_density_first(leaf.cache, pts.slice(0, b, e), dirs.slice(0, b, e));
+        torch::autograd::backward({raw}, {g.slice(0, b, e)});
+      }
+      grads = leaf.grads();
     }
     grads.emplace_back();  // pts
     grads.emplace_back();  // dirs
@@ -269,8 +311,16 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
 
 }  // namespace
 
-FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint)
-    : model_(model), cache_(cache), chunk_(chunk_points), checkpoint_(checkpoint) {}
+FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint,
+                       int64_t keep_graph_points)
+    : model_(model), cache_(cache), chunk_(chunk_points), checkpoint_(checkpoint),
+      keep_graph_points_(keep_graph_points) {}
+
+int64_t keep_graph_points(const RenderConfig& config) {
+  if (config.train_recompute == "always") return 0;
+  if (config.train_recompute == "never") return std::numeric_limits<int64_t>::max();
+  return kKeepGraphPoints;
+}
 
 torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dirs) {
   if (!checkpoint_ || !torch::GradMode::is_enabled()) return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
@@ -278,6 +328,7 @@ torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dir
   job->model = &model_;
   job->cache = cache_;
   job->chunk = chunk_;
+  job->keep_graph = pts.size(0) <= keep_graph_points_;
   std::vector<torch::Tensor> frame;
   job->cache.visit([&](torch::Tensor& t, torch::Tensor*) {
     if (t.defined() && t.requires_grad()) frame.push_back(t);
@@ -293,7 +344,7 @@ torch::Tensor FrameField::raw_density_first(const torch::Tensor& pts, const torc
 render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCache& cache,
                                           const render::Rays& rays, const RenderConfig& config,
                                           bool skip_far_points, render::Profile* profile) {
-  FrameField field(model, cache, config.train_chunk_points, true);
+  FrameField field(model, cache, config.train_chunk_points, true, keep_graph_points(config));
   return render::VolumeRenderer(config, profile)
       .render(field, rays, true, skip_far_points ? cache.geometry.body.get() : nullptr);
 }

@@ -83,9 +83,13 @@ TORCH_MODULE(TransHuman);
 // evaluates colour only where sigma_raw > 0 (same image, same gradients: zero weight there).
 // Parameters used per point get their gradients during the backward pass through .grad, so use
 // backward() (not torch::autograd::grad) on losses built from it.
+// With `keep_graph_points` > 0, a call of at most that many points keeps its chunks' graphs from
+// the forward pass instead (one forward less, memory of all its chunks); the backward pass
+// runs the same chunks in the same order, so the gradients are the same bit for bit.
 class FrameField : public render::RadianceField {
  public:
-  FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint = true);
+  FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint = true,
+             int64_t keep_graph_points = 0);
   torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) override;
   torch::Tensor raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) override;
 
@@ -94,7 +98,14 @@ class FrameField : public render::RadianceField {
   const FrameCache& cache_;
   int64_t chunk_;
   bool checkpoint_;
+  int64_t keep_graph_points_;
 };
+
+// render.train_recompute "auto": training field calls of up to this many points keep their
+// chunks' graphs (the demo's 16,384 samples per step; about 60 MiB of graph per 1,000 points).
+constexpr int64_t kKeepGraphPoints = 65536;
+// The keep_graph_points of FrameField for render.train_recompute (auto, always, never).
+int64_t keep_graph_points(const RenderConfig& config);
 
 // Rendering one prepared frame the way training and inference do it.
 // Training: stratified samples; every sample evaluated (or, with skip_far_points, those within

@@ -70,6 +70,31 @@ TEST_CASE("a run stopped and resumed ends with the same weights as one that was 
   CHECK(changed > 10);
 }
 
+TEST_CASE("keeping the per-point graphs trains the same weights as recomputing them, bit for bit",
+          "[train][recompute]") {
+  torch::set_num_threads(1);
+  // Chunks of 256 of the 1,024 samples per step: several chunks, run in the same order.
+  for (const char* skip : {"false", "true"}) {
+    CAPTURE(skip);
+    std::map<std::string, std::map<std::string, torch::Tensor>> weights;
+    for (const char* mode : {"always", "never", "auto"}) {
+      const auto c = tiny_config({"train.val_views=0", "render.train_chunk_points=256",
+                                  std::string("render.train_recompute=") + mode,
+                                  std::string("train.skip_far_points=") + skip});
+      const fs::path run = th::test::scratch_dir(std::string("recompute_") + mode + "_" + skip);
+      CHECK(th::train::train(c, torch::kCPU, {run, false, 3}).steps == 3);
+      weights[mode] = weights_of(run / "checkpoints" / "latest.pt", c);
+    }
+    for (const char* mode : {"never", "auto"}) {
+      CAPTURE(mode);
+      REQUIRE(weights[mode].size() == weights["always"].size());
+      size_t differing = 0;
+      for (const auto& [name, t] : weights["always"]) differing += !torch::equal(t, weights[mode].at(name));
+      CHECK(differing == 0);
+    }
+  }
+}
+
 TEST_CASE("the run directory holds metrics, checkpoints, validation images and the curve", "[train]") {
   const auto c = tiny_config();
   const fs::path run = th::test::scratch_dir("train_outputs");
