@@ -42,6 +42,8 @@ F find_symbol(const char* name) {
 bool keep_freed_memory() {
   const char* mode = std::getenv("TH_MALLOC");
   if (mode && std::strcmp(mode, "system") == 0) return false;
+  if (mode && *mode && std::strcmp(mode, "keep") != 0)
+    fail("environment variable TH_MALLOC='", mode, "': expected 'system' (glibc defaults) or 'keep'");
 #ifdef __GLIBC__
   return mallopt(M_MMAP_MAX, 0) == 1 && mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()) == 1;
 #else

@@ -23,7 +23,8 @@ void log_blas();
 // tensors of the per-point network are tens of MB, and by default glibc maps and unmaps each
 // one (every page of it faulted in again, each chunk: the page faults then cost as much as the
 // arithmetic; transhuman-bench-speed measures it). The arithmetic is unchanged. TH_MALLOC=system
-// keeps glibc's defaults. Returns whether it was applied.
+// keeps glibc's defaults (TH_MALLOC=keep, or unset: this); another value is a th::Error.
+// Returns whether it was applied.
 bool keep_freed_memory();
 
 // "auto" -> CUDA when the linked LibTorch has it and a GPU is present, else CPU.

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "render/segments.hpp"
+
 namespace th::render {
 namespace {
 
@@ -15,14 +17,6 @@ int64_t march_step(int64_t samples) { return std::max<int64_t>(2, samples / 16);
 // The march keeps (rays x samples) masks and raw values of a whole batch: this many samples
 // per batch (16 MiB of raw values) bound its memory.
 constexpr int64_t kMarchSamples = int64_t(1) << 20;
-
-// Per-sample distances of SPEC 4's compositing, (n, S): (z_{i+1} - z_i) |d|, last 1e10 |d|.
-torch::Tensor sample_lengths(const torch::Tensor& z, const torch::Tensor& directions) {
-  const auto S = z.size(1);
-  return torch::cat({z.narrow(1, 1, S - 1) - z.narrow(1, 0, S - 1), torch::full({z.size(0), 1}, 1e10, z.options())},
-                    1) *
-         directions.norm(2, 1, true);
-}
 
 }  // namespace
 
@@ -82,7 +76,7 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
       // front of the next one, exp(sum log(1 - alpha + 1e-10)) as in compositing, is below tau.
       const int64_t m = march_step(S);
       const auto rank = keep.cumsum(1) - 1;  // the rank of each kept sample along its ray
-      const auto lengths = sample_lengths(z, r.directions).flatten();
+      const auto lengths = segment_lengths(z, r.directions).flatten();
       auto log_trans = torch::zeros({n}, pts.options());
       auto running = ray_kept > 0;
       const double log_tau = std::log(tau);

@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "render/body_distance.hpp"
+#include "render/segments.hpp"
 
 namespace th::render {
 
@@ -33,15 +34,19 @@ torch::Tensor sample_depths(const torch::Tensor& near, const torch::Tensor& far,
   return z;
 }
 
+torch::Tensor segment_lengths(const torch::Tensor& z, const torch::Tensor& directions) {
+  const auto S = z.size(1);
+  return torch::cat({z.narrow(1, 1, S - 1) - z.narrow(1, 0, S - 1), torch::full({z.size(0), 1}, 1e10, z.options())},
+                    1) *
+         directions.norm(2, 1, true);
+}
+
 Composite composite(const torch::Tensor& raw, const torch::Tensor& z, const torch::Tensor& directions) {
   TORCH_CHECK(raw.dim() == 3 && raw.size(2) == 4, "raw must be (R, S, 4), got ", raw.sizes());
   TORCH_CHECK(z.sizes() == raw.sizes().slice(0, 2), "z must be (R, S) like raw, got ", z.sizes());
   TORCH_CHECK(directions.dim() == 2 && directions.size(0) == raw.size(0), "directions must be (R, 3)");
   const auto S = z.size(1);
-  auto dists = torch::cat({z.narrow(1, 1, S - 1) - z.narrow(1, 0, S - 1),
-                           torch::full({z.size(0), 1}, 1e10, z.options())},
-                          1);
-  dists = dists * directions.norm(2, 1, true);
+  const auto dists = segment_lengths(z, directions);
   const auto rgb = torch::sigmoid(raw.narrow(2, 0, 3));
   const auto alpha = 1 - torch::exp(-torch::relu(raw.select(2, 3)) * dists);
   // Exclusive cumulative product of (1 - alpha + 1e-10).
