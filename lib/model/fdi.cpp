@@ -12,25 +12,97 @@ namespace F = torch::nn::functional;
 
 namespace {
 
-// Row pointers of an (N, V, C) tensor whose last dimension is contiguous.
+// Sixteen independent partial sums, so that the compiler vectorises the reduction (a plain
+// running sum is a dependency chain it must keep in order).
 template <class T>
-struct Rows {
-  T* data;
-  int64_t sn, sv;
-  explicit Rows(const torch::Tensor& t) : data(t.data_ptr<T>()), sn(t.stride(0)), sv(t.stride(1)) {}
-  T* at(int64_t n, int64_t v) const { return data + n * sn + v * sv; }
-};
-
-template <class T>
-T dot(const T* a, const T* b, int64_t c) {
+inline __attribute__((always_inline)) T dot(const T* __restrict a, const T* __restrict b, int64_t c) {
+  T acc[16] = {};
+  int64_t i = 0;
+  for (; i + 16 <= c; i += 16)
+    for (int j = 0; j < 16; ++j) acc[j] += a[i + j] * b[i + j];
   T s = 0;
-  for (int64_t i = 0; i < c; ++i) s += a[i] * b[i];
+  for (; i < c; ++i) s += a[i] * b[i];
+  for (int j = 0; j < 16; ++j) s += acc[j];
   return s;
 }
 
 template <class T>
-void axpy(T* y, T a, const T* x, int64_t c) {
+inline __attribute__((always_inline)) void axpy(T* __restrict y, T a, const T* __restrict x, int64_t c) {
   for (int64_t i = 0; i < c; ++i) y[i] += a * x[i];
+}
+
+// Forward of points [b, e): QR, KV (N, V, W) rows, W = d + C; O (N, V, C) holds r on entry and
+// the output on return; A (N, V, V) receives the attention weights.
+template <class T>
+inline __attribute__((always_inline)) void attend_rows(const T* QR, const T* KV, T* O, T* A, int64_t b, int64_t e,
+                                                       int64_t V, int64_t d, int64_t C, T scale) {
+  const int64_t W = d + C;
+  for (int64_t n = b; n < e; ++n) {
+    T* a = A + n * V * V;
+    for (int64_t v = 0; v < V; ++v) {
+      const T* q = QR + (n * V + v) * W;
+      T m = -std::numeric_limits<T>::infinity(), s = 0;
+      for (int64_t j = 0; j < V; ++j) m = std::max(m, a[v * V + j] = dot(q, KV + (n * V + j) * W, d) * scale);
+      for (int64_t j = 0; j < V; ++j) s += (a[v * V + j] = std::exp(a[v * V + j] - m));
+      for (int64_t j = 0; j < V; ++j) axpy(O + (n * V + v) * C, a[v * V + j] /= s, KV + (n * V + j) * W + d, C);
+    }
+  }
+}
+
+// Backward of points [b, e): G (N, V, C) output gradient; GQR, GKV (N, V, W) receive the
+// gradients of the q and k parts (GKV's u part too); ga is V * V scratch.
+template <class T>
+inline __attribute__((always_inline)) void attend_rows_backward(const T* QR, const T* KV, const T* A, const T* G,
+                                                                T* GQR, T* GKV, T* ga, int64_t b, int64_t e,
+                                                                int64_t V, int64_t d, int64_t C, T scale) {
+  const int64_t W = d + C;
+  for (int64_t n = b; n < e; ++n) {
+    const T* a = A + n * V * V;
+    for (int64_t v = 0; v < V; ++v) {
+      const T* gv = G + (n * V + v) * C;
+      T inner = 0;
+      for (int64_t j = 0; j < V; ++j) {
+        axpy(GKV + (n * V + j) * W + d, a[v * V + j], gv, C);  // d u_j
+        ga[v * V + j] = dot(gv, KV + (n * V + j) * W + d, C);
+        inner += a[v * V + j] * ga[v * V + j];
+      }
+      for (int64_t j = 0; j < V; ++j) {
+        const T gl = a[v * V + j] * (ga[v * V + j] - inner) * scale;
+        axpy(GQR + (n * V + v) * W, gl, KV + (n * V + j) * W, d);  // d q_v
+        axpy(GKV + (n * V + j) * W, gl, QR + (n * V + v) * W, d);  // d k_j
+      }
+    }
+  }
+}
+
+// float: one clone per vector width, chosen at run time (the project builds for baseline x86-64).
+__attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_f(
+    const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
+    float scale) {
+  attend_rows<float>(QR, KV, O, A, b, e, V, d, C, scale);
+}
+__attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_backward_f(
+    const float* QR, const float* KV, const float* A, const float* G, float* GQR, float* GKV, float* ga, int64_t b,
+    int64_t e, int64_t V, int64_t d, int64_t C, float scale) {
+  attend_rows_backward<float>(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
+}
+void attend_rows_any(const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e, int64_t V,
+                     int64_t d, int64_t C, float scale) {
+  attend_rows_f(QR, KV, O, A, b, e, V, d, C, scale);
+}
+void attend_rows_any(const double* QR, const double* KV, double* O, double* A, int64_t b, int64_t e, int64_t V,
+                     int64_t d, int64_t C, double scale) {
+  attend_rows<double>(QR, KV, O, A, b, e, V, d, C, scale);
+}
+void attend_rows_backward_any(const float* QR, const float* KV, const float* A, const float* G, float* GQR,
+                              float* GKV, float* ga, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
+                              float scale) {
+  attend_rows_backward_f(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
+}
+void attend_rows_backward_any(const double* QR, const double* KV, const double* A, const double* G, double* GQR,
+                              double* GKV, double* ga, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
+                              double scale) {
+  attend_rows_backward<double>(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
 }
 
 // Packed operands: qr = [q | r] and kv = [k | u] along the channels, (N, V, d + C), so that the
@@ -49,17 +121,7 @@ struct ViewAttention : torch::autograd::Function<ViewAttention> {
       scalar_t* O = out.data_ptr<scalar_t>();
       scalar_t* A = att.data_ptr<scalar_t>();
       at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
-        for (int64_t n = b; n < e; ++n) {
-          scalar_t* a = A + n * V * V;
-          for (int64_t v = 0; v < V; ++v) {
-            const scalar_t* q = QR + (n * V + v) * W;
-            scalar_t m = -std::numeric_limits<scalar_t>::infinity(), s = 0;
-            for (int64_t j = 0; j < V; ++j)
-              m = std::max(m, a[v * V + j] = dot(q, KV + (n * V + j) * W, d) * static_cast<scalar_t>(scale));
-            for (int64_t j = 0; j < V; ++j) s += (a[v * V + j] = std::exp(a[v * V + j] - m));
-            for (int64_t j = 0; j < V; ++j) axpy(O + (n * V + v) * C, a[v * V + j] /= s, KV + (n * V + j) * W + d, C);
-          }
-        }
+        attend_rows_any(QR, KV, O, A, b, e, V, d, C, static_cast<scalar_t>(scale));
       });
     });
     ctx->save_for_backward({qr, kv, att});
@@ -87,23 +149,7 @@ struct ViewAttention : torch::autograd::Function<ViewAttention> {
       scalar_t* GKV = gkv.data_ptr<scalar_t>();
       at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
         std::vector<scalar_t> ga(V * V);
-        for (int64_t n = b; n < e; ++n) {
-          const scalar_t* a = A + n * V * V;
-          for (int64_t v = 0; v < V; ++v) {
-            const scalar_t* gv = G + (n * V + v) * C;
-            scalar_t inner = 0;
-            for (int64_t j = 0; j < V; ++j) {
-              axpy(GKV + (n * V + j) * W + d, a[v * V + j], gv, C);  // d u_j
-              ga[v * V + j] = dot(gv, KV + (n * V + j) * W + d, C);
-              inner += a[v * V + j] * ga[v * V + j];
-            }
-            for (int64_t j = 0; j < V; ++j) {
-              const scalar_t gl = a[v * V + j] * (ga[v * V + j] - inner) * static_cast<scalar_t>(scale);
-              axpy(GQR + (n * V + v) * W, gl, KV + (n * V + j) * W, d);   // d q_v
-              axpy(GKV + (n * V + j) * W, gl, QR + (n * V + v) * W, d);   // d k_j
-            }
-          }
-        }
+        attend_rows_backward_any(QR, KV, A, G, GQR, GKV, ga.data(), b, e, V, d, C, static_cast<scalar_t>(scale));
       });
     });
     return {gqr, gkv, torch::Tensor()};
