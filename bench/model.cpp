@@ -267,7 +267,11 @@ int main(int argc, char** argv) {
     // Frame tensors as leaves: the per-point part only (the frame's own backward is excluded),
     // with gradient sinks for the gathered tables as the training path uses them.
     // (Not the geometry, the token frames or the raw images: no gradient reaches them.)
-    model::FrameCache cache_g = cache_ng;
+    // Prepared with autograd on, as training prepares (level tables, not inference's readout windows).
+    model::FrameCache cache_g = [&] {
+      torch::AutoGradMode grad(true);
+      return net->prepare(scene.in);
+    }();
     cache_g.visit([](torch::Tensor& t, torch::Tensor* sink) {
       if (!t.defined() || !t.is_floating_point()) return;
       t = t.detach().requires_grad_(true);

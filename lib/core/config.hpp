@@ -106,6 +106,9 @@ struct ModelConfig {
   // SPEC 9 identities (per-level readouts of p_v, fc_0 on the tokens, folded linear layers);
   // false: the reference's direct computation (slower; for checking).
   bool exact_shortcuts = true;
+  // SPEC 9 readout windows (with exact_shortcuts, inference on CPU): the readouts at full
+  // resolution on a rectangle of each view around the body; false: per-level tables.
+  bool readout_windows = true;
 };
 
 // ---- rendering (SPEC 4) ------------------------------------------------------------------
@@ -262,6 +265,7 @@ template <class V> void visit_fields(V& v, ModelConfig& c) {
   v("fdi", c.fdi);
   v("spc", c.spc);
   v("exact_shortcuts", c.exact_shortcuts);
+  v("readout_windows", c.readout_windows);
 }
 template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("samples", c.samples);

@@ -1,5 +1,7 @@
 #include "model/encoder.hpp"
 
+#include <ATen/Parallel.h>
+
 #include "core/error.hpp"
 
 namespace th::model {
@@ -172,6 +174,74 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
   return torch::cat(parts, 1);
 }
 
+std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::TensorOptions& options) const {
+  std::vector<torch::Tensor> uv, view;
+  for (size_t v = 0; v < offset.size(); ++v) {
+    const auto ys = torch::arange(y0[v], y0[v] + h[v], options);
+    const auto xs = torch::arange(x0[v], x0[v] + w[v], options);
+    const auto grid = torch::meshgrid({ys, xs}, "ij");
+    uv.push_back(torch::stack({grid[1].flatten(), grid[0].flatten()}, 1));
+    view.push_back(torch::full({h[v] * w[v]}, int64_t(v), options.dtype(torch::kLong)));
+  }
+  return {torch::cat(uv), torch::cat(view)};
+}
+
+std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t H,
+                                                  int64_t W) const {
+  TORCH_CHECK(uv.device().is_cpu() && uv.dim() == 2 && uv.size(1) == 2, "window taps: uv must be (M, 2) on CPU, got ",
+              uv.sizes());
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "window taps: view must be (M), got ", view.sizes());
+  const int64_t M = uv.size(0);
+  const auto uvc = uv.contiguous();
+  const auto vc = view.to(torch::kLong).contiguous();
+  Taps t{torch::empty({M, 4}, vc.options()), torch::empty({M, 4}, uv.options())};
+  auto inside = torch::empty({M}, vc.options().dtype(torch::kBool));
+  AT_DISPATCH_FLOATING_TYPES(uv.scalar_type(), "window_taps", [&] {
+    const scalar_t* p = uvc.data_ptr<scalar_t>();
+    const int64_t* vv = vc.data_ptr<int64_t>();
+    int64_t* ti = t.index.data_ptr<int64_t>();
+    scalar_t* tw = t.weight.data_ptr<scalar_t>();
+    bool* in = inside.data_ptr<bool>();
+    // One axis as grid_sample reads it: clamp to the image (NaN reads pixel 0), then the pixel
+    // below and the next one (the last pixel twice at the border).
+    auto axis = [](scalar_t x, int64_t S, int64_t& i0, int64_t& i1, scalar_t& f) {
+      x = x >= scalar_t(0) ? std::min(x, static_cast<scalar_t>(S - 1)) : scalar_t(0);
+      const scalar_t lo = std::min(std::max(std::floor(x), scalar_t(0)), static_cast<scalar_t>(std::max<int64_t>(S - 2, 0)));
+      f = x - lo;
+      i0 = static_cast<int64_t>(lo);
+      i1 = std::min(i0 + 1, S - 1);
+    };
+    at::parallel_for(0, M, 4096, [&](int64_t b, int64_t e) {
+      for (int64_t m = b; m < e; ++m) {
+        int64_t ix0, ix1, iy0, iy1;
+        scalar_t fx, fy;
+        axis(p[2 * m], W, ix0, ix1, fx);
+        axis(p[2 * m + 1], H, iy0, iy1, fy);
+        const int64_t v = vv[m];
+        const bool ok = v >= 0 && v < int64_t(offset.size()) && ix0 >= x0[v] && ix1 < x0[v] + w[v] &&
+                        iy0 >= y0[v] && iy1 < y0[v] + h[v];
+        in[m] = ok;
+        int64_t* i = ti + 4 * m;
+        scalar_t* wt = tw + 4 * m;
+        if (!ok) {
+          for (int k = 0; k < 4; ++k) i[k] = 0, wt[k] = 0;
+          continue;
+        }
+        const int64_t base = offset[v] - y0[v] * w[v] - x0[v];
+        i[0] = base + iy0 * w[v] + ix0;
+        i[1] = base + iy0 * w[v] + ix1;
+        i[2] = base + iy1 * w[v] + ix0;
+        i[3] = base + iy1 * w[v] + ix1;
+        wt[0] = (1 - fy) * (1 - fx);
+        wt[1] = (1 - fy) * fx;
+        wt[2] = fy * (1 - fx);
+        wt[3] = fy * fx;
+      }
+    });
+  });
+  return {t, inside};
+}
+
 PixelReadout EncoderImpl::make_readout(const EncodedViews& enc, const torch::Tensor& weight,
                                        const torch::Tensor& bias) const {
   TORCH_CHECK(weight.dim() == 2 && weight.size(1) == pixel_channels(),
@@ -185,6 +255,8 @@ PixelReadout EncoderImpl::make_readout(const EncodedViews& enc, const torch::Ten
   r.table = torch::cat(tables, 0);
   r.image_table = to_table(enc.images).detach();
   r.bias = bias;
+  r.weight = weight;
+  r.layer_bias = bias;
   if (raw_rgb_) {
     const auto wc = weight.slice(1, 256, 384);  // (Cout, 128)
     r.image_weight = torch::mm(wc, upsample_color->weight.flatten(1));

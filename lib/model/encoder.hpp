@@ -86,9 +86,31 @@ struct PixelReadout {
   torch::Tensor image_weight;  // (Cout, 3) composed weight of the raw-RGB channels; undefined w/o RGB
   torch::Tensor bias;          // (Cout)
   torch::Tensor table_grad_sink;  // optional, see weighted_gather
+  // The layer itself, (Cout, Cpix) and (Cout), for points outside the windows (window form).
+  torch::Tensor weight, layer_bias;
+  // Window form (inference, model/shortcuts.hpp): y at every pixel of the windows, stacked as
+  // PixelWindows orders them, (rows, Cout); `table` is then undefined.
+  torch::Tensor window_table;
 
   // level_taps/image_taps from PixelGeometry for M points; returns (M, Cout).
   torch::Tensor sample(const Taps& level_taps, const Taps& image_taps) const;
+};
+
+// One rectangle of pixels per view, [x0, x0 + w) x [y0, y0 + h), whose pixels are stacked view
+// after view (row-major within a view) in a table of full-resolution values.
+struct PixelWindows {
+  std::vector<int64_t> x0, y0, w, h, offset;  // per view; offset: the view's first row
+  int64_t rows() const { return offset.empty() ? 0 : offset.back() + w.back() * h.back(); }
+  bool empty() const { return offset.empty(); }
+
+  // The rows of every window pixel (rows(), 2) pixel coordinates (x, y) and their views (rows()).
+  std::pair<torch::Tensor, torch::Tensor> pixels(const torch::TensorOptions& options) const;
+  // Bilinear taps (grid_sample: border padding, align_corners) of M points into the stacked
+  // table, uv: (M, 2) pixel coordinates of an (H, W) image, view: (M). Returns the taps (M, 4)
+  // and whether each point's four texels all lie in its view's window, (M) bool; the taps of a
+  // point outside read row 0 with weight 0.
+  std::pair<Taps, torch::Tensor> taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t H,
+                                      int64_t W) const;
 };
 
 class EncoderImpl : public torch::nn::Module {

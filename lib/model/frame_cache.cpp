@@ -16,6 +16,7 @@ void FrameCache::visit(const std::function<void(torch::Tensor&, torch::Tensor*)>
     fn(r->image_table, nullptr);
     fn(r->image_weight, nullptr);
     fn(r->bias, nullptr);
+    fn(r->window_table, nullptr);  // (r->weight and layer_bias are the layer's parameters)
   }
   auto& h = human;
   fn(h.frames.origins, nullptr);

@@ -48,6 +48,9 @@ struct PixelStage {
   // Exact shortcuts: the linear layers that read p_v applied once per level (SPEC 9), for the
   // appearance feature (FDI's alpha_res_0) and for the colour head (folded readout).
   PixelReadout alpha, color;
+  // Readout windows (inference, SPEC 9, model/shortcuts.hpp): where the readouts' window
+  // tables lie; levels and images above then serve the points outside them.
+  PixelWindows windows;
 };
 
 // The human representation stage read by DPaRF (SPEC 3.2, 3.3), or the SPC baseline's volume.

@@ -38,7 +38,19 @@ FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads);
 // sampling, so FDI's alpha_res_0 and the colour head's folded readout are applied to each
 // ResNet level (and the raw-RGB channels to the image) once per frame: PixelStage::alpha and
 // ::color, read per point by PixelReadout::sample. p_v is never formed at full resolution.
+// With `windows` (4. below), the readouts take their window form.
 void make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                         const HeadsFolded& heads, PixelStage& pixels);
+                         const HeadsFolded& heads, PixelStage& pixels, const PixelWindows* windows = nullptr);
+
+// 4. Readout windows (inference on CPU). Progressive rendering evaluates only points within the
+// culling distance of a body vertex, and those project into a rectangle of each view: the
+// projection of the vertices' cubes of half-side `distance` (they contain the balls), plus a
+// pixel. There the readouts are stored at full resolution (each window pixel read from the
+// level table, which is then dropped), so a point reads 4 texels instead of 9 per level and 4
+// of the image: the same bilinear function, float rounding aside. Points elsewhere (full
+// rendering, mesh grids) read p_v from the levels and apply the layer (PixelReadout::weight),
+// as encoder.fast_sampling does. A view whose cubes reach behind the camera gets the whole image.
+PixelWindows body_windows(const FrameGeometry& geometry, const torch::Tensor& vertices, double distance,
+                          const PixelGeometry& pixels);
 
 }  // namespace th::model

@@ -81,7 +81,13 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   if (config_.fdi.appearance) {
     auto& px = cache.pixels;
     if (config_.exact_shortcuts) {
-      make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px);  // SPEC 9
+      // SPEC 9; on CPU without a gradient (inference) in the window form
+      if (config_.readout_windows && !torch::GradMode::is_enabled() && opts.device().is_cpu() && cull_distance_ > 0) {
+        const auto windows = body_windows(geo, in.vertices, cull_distance_, enc.geometry);
+        make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px, &windows);
+      } else {
+        make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px);
+      }
     } else if (config_.encoder.fast_sampling) {
       px.levels = enc.levels;
       px.images = enc.images;
@@ -113,6 +119,22 @@ torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadou
   const auto n = uv.size(0), V = uv.size(1);
   const auto flat = uv.reshape({-1, 2});
   const auto view = view_ids(n, V, uv.device());
+  if (readout.window_table.defined()) {  // SPEC 9 readout windows
+    const auto [taps, inside] = px.windows.taps(flat, view, px.geometry.height, px.geometry.width);
+    auto out = weighted_gather(readout.window_table, taps);
+    if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
+      const auto idx = (~inside).nonzero().flatten();
+      const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
+      EncodedViews enc;
+      enc.levels = px.levels;
+      enc.images = px.images;
+      enc.geometry = px.geometry;
+      const auto p = encoder->sample_pixel_features(enc, px.geometry.stacked_level_taps(f, v),
+                                                    px.geometry.image_taps(f, v));
+      out.index_copy_(0, idx, F::linear(p, readout.weight, readout.layer_bias));
+    }
+    return out.view({n, V, -1});
+  }
   return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
       .view({n, V, -1});
 }
@@ -183,9 +205,12 @@ torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, con
     ScopedTimer timer(profile_, "heads");
     sigma = heads->density(t.e);
   }
+  const auto idx = (sigma > 0).nonzero().flatten();
+  // Every point has density (a translucent model): colour for all rows, without copying the
+  // trunk's (N, V, 256) output row by row.
+  if (idx.size(0) == pts.size(0)) return torch::cat({color(cache, t, dirs), sigma.unsqueeze(1)}, 1);
   auto raw = torch::zeros({pts.size(0), 4}, sigma.options());
   raw.select(1, 3).copy_(sigma);
-  const auto idx = (sigma > 0).nonzero().flatten();
   if (idx.size(0) == 0) return raw;
   const Trunk sub{t.e.index_select(0, idx), t.uv.index_select(0, idx)};
   raw.index_copy_(0, idx, torch::cat({color(cache, sub, dirs.index_select(0, idx)),

@@ -276,7 +276,8 @@ constexpr const char* kConfigKey = "model_config";
 
 // Model keys that do not change the function a checkpoint computes.
 bool compared(const std::string& key) {
-  return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" && key != "model.exact_shortcuts";
+  return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" && key != "model.exact_shortcuts" &&
+         key != "model.readout_windows";
 }
 
 }  // namespace

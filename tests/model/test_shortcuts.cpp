@@ -2,8 +2,11 @@
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <array>
+
 #include "model/frame_fixture.hpp"
 #include "model/sampling.hpp"
+#include "model/shortcuts.hpp"
 #include "model/transhuman.hpp"
 
 using namespace th;
@@ -23,6 +26,17 @@ torch::Tensor random_uv(int64_t n, int64_t V, int64_t W, int64_t H) {
   uv.index_put_({0}, torch::tensor({0.0, 0.0}));
   uv.index_put_({1}, torch::tensor({static_cast<double>(W - 1), static_cast<double>(H - 1)}));
   return uv;
+}
+
+// Copies a's weights into b and puts both in inference mode.
+void same_weights_for_inference(TransHuman& a, TransHuman& b) {
+  {
+    torch::NoGradGuard ng;
+    auto src = a->named_parameters();
+    for (auto& p : b->named_parameters()) p.value().copy_(src[p.key()]);
+  }
+  a->eval();
+  b->eval();
 }
 
 }  // namespace
@@ -118,13 +132,7 @@ TEST_CASE("the model with SPEC 9 shortcuts equals the direct computation", "[mod
       cd.exact_shortcuts = false;
       cd.encoder.fast_sampling = false;
       TransHuman direct(cd);
-      {
-        torch::NoGradGuard ng;
-        auto src = fast->named_parameters();
-        for (auto& p : direct->named_parameters()) p.value().copy_(src[p.key()]);
-      }
-      fast->eval();
-      direct->eval();
+      same_weights_for_inference(fast, direct);
       torch::NoGradGuard ng;
       const auto pts = frame.inputs.vertices.narrow(0, 0, 64) + 0.05 * torch::randn({64, 3});
       const auto dirs = torch::randn({64, 3});
@@ -174,4 +182,115 @@ TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][sho
       if (a.coords.defined()) CHECK(max_abs(a.coords, b.coords) < 1e-5);
     }
   }
+}
+
+TEST_CASE("readout windows sample a full-resolution map as grid_sample does", "[model][sampling][windows]") {
+  torch::manual_seed(11);
+  const int64_t V = 3, C = 6, H = 23, W = 31, n = 400;
+  const auto map = torch::randn({V, C, H, W}, torch::kDouble);
+  PixelWindows win;
+  // An interior rectangle, one touching the right and bottom borders, the whole image.
+  const std::vector<std::array<int64_t, 4>> rects{{4, 3, 12, 9}, {20, 10, 11, 13}, {0, 0, W, H}};
+  std::vector<torch::Tensor> rows;
+  int64_t offset = 0;
+  for (int64_t v = 0; v < V; ++v) {
+    const auto [x0, y0, w, h] = rects[v];
+    win.x0.push_back(x0), win.y0.push_back(y0), win.w.push_back(w), win.h.push_back(h), win.offset.push_back(offset);
+    offset += w * h;
+    rows.push_back(map[v].slice(1, y0, y0 + h).slice(2, x0, x0 + w).permute({1, 2, 0}).reshape({-1, C}));
+  }
+  const auto table = torch::cat(rows);
+  REQUIRE(win.rows() == table.size(0));
+  // The window pixels, in table order, are where the table's rows come from.
+  const auto [px, pv] = win.pixels(torch::TensorOptions().dtype(torch::kDouble));
+  const auto at = map.permute({0, 2, 3, 1}).index({pv, px.select(1, 1).to(torch::kLong), px.select(1, 0).to(torch::kLong)});
+  CHECK(torch::equal(at, table));
+
+  const auto uv = random_uv(n, V, W, H).to(torch::kDouble);
+  const auto flat = uv.reshape({-1, 2});
+  const auto view = torch::arange(V).repeat({n});
+  const auto [taps, inside] = win.taps(flat, view, H, W);
+  const auto direct = grid_sample_pixels(map, uv).reshape({-1, C});
+  const auto fast = weighted_gather(table, taps);
+  // Inside: grid_sample's value; outside: flagged, with zero weights.
+  const auto x = flat.select(1, 0).clamp(0, W - 1), y = flat.select(1, 1).clamp(0, H - 1);
+  const auto ix0 = x.floor().clamp(0, W - 2), iy0 = y.floor().clamp(0, H - 2);
+  const auto ix1 = (ix0 + 1).clamp_max(W - 1), iy1 = (iy0 + 1).clamp_max(H - 1);
+  auto expected = torch::zeros_like(inside);
+  for (int64_t m = 0; m < flat.size(0); ++m) {
+    const auto [x0, y0, w, h] = rects[view[m].item<int64_t>()];
+    expected[m] = ix0[m].item<double>() >= x0 && ix1[m].item<double>() < x0 + w && iy0[m].item<double>() >= y0 &&
+                  iy1[m].item<double>() < y0 + h;
+  }
+  CHECK(torch::equal(inside, expected));
+  CHECK(inside.sum().item<int64_t>() > n / 2);
+  CHECK((~inside).sum().item<int64_t>() > 20);
+  CHECK(max_abs(fast.index({inside}), direct.index({inside})) < 1e-12);
+  CHECK(fast.index({~inside}).abs().max().item<double>() == 0);
+  CHECK(taps.weight.index({~inside}).abs().max().item<double>() == 0);
+}
+
+TEST_CASE("body windows contain the projection of every point within the culling distance", "[model][windows]") {
+  const auto frame = test::synthetic_frame(300, 24, 3, 64);
+  const auto& in = frame.inputs;
+  FrameGeometry geo;
+  geo.K = in.K.to(torch::kFloat), geo.R = in.R.to(torch::kFloat), geo.T = in.T.to(torch::kFloat).reshape({-1, 3, 1});
+  PixelGeometry g;
+  g.views = 3, g.height = 64, g.width = 64;
+  for (double r : {0.1, 0.02}) {
+    const auto win = body_windows(geo, in.vertices, r, g);
+    REQUIRE(win.offset.size() == 3);
+    int64_t area = 0;
+    for (int64_t v = 0; v < 3; ++v) area += win.w[v] * win.h[v];
+    CHECK(area < 3 * 64 * 64);  // a real crop, not the whole images
+    // Points in the balls of radius r (on their surfaces too) around the vertices.
+    torch::manual_seed(12);
+    const int64_t n = 20000;
+    auto dir = torch::randn({n, 3});
+    dir = dir / dir.norm(2, 1, true);
+    const auto radius = r * torch::where(torch::rand({n}) < 0.3, torch::ones({n}), torch::rand({n}).pow(1.0 / 3));
+    const auto pts = in.vertices.index_select(0, torch::randint(0, in.vertices.size(0), {n})) + dir * radius.unsqueeze(1);
+    const auto uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).reshape({-1, 2});
+    const auto view = torch::arange(3).repeat({n});
+    CHECK(win.taps(uv, view, 64, 64).second.all().item<bool>());
+    // The vertices themselves lie inside (left edges checked here).
+    const auto vu = project_points(in.vertices, geo.K, geo.R, geo.T);
+    for (int64_t v = 0; v < 3; ++v)
+      CHECK(win.x0[v] <= std::max<int64_t>(0, int64_t(std::floor(vu[v].select(1, 0).min().item<double>()))));
+  }
+}
+
+TEST_CASE("readout windows give the level tables' values, inside and outside the windows", "[model][windows]") {
+  const auto frame = test::synthetic_frame(300, 24, 3, 48);
+  auto c = test::tiny_model_config();
+  torch::manual_seed(13);
+  TransHuman windows(c, 0.1);
+  auto ct = c;
+  ct.readout_windows = false;
+  TransHuman tables(ct, 0.1);
+  same_weights_for_inference(windows, tables);
+  torch::NoGradGuard ng;
+  const auto a = windows->prepare(frame.inputs), b = tables->prepare(frame.inputs);
+  REQUIRE(a.pixels.alpha.window_table.defined());
+  CHECK(!a.pixels.alpha.table.defined());
+  CHECK(a.pixels.color.window_table.defined());
+  CHECK(!b.pixels.alpha.window_table.defined());
+  torch::manual_seed(14);
+  const int64_t n = 500;
+  // Near the body (inside the windows) and far from it (read from the levels).
+  const auto near = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) + 0.05 * torch::rand({n, 3});
+  const auto far = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) + 0.6 * torch::randn({n, 3});
+  const auto pts = torch::cat({near, far}), dirs = torch::randn({2 * n, 3});
+  const auto& in = frame.inputs;
+  const auto uv = project_points(far, in.K.to(torch::kFloat), in.R.to(torch::kFloat), in.T.to(torch::kFloat).reshape({-1, 3, 1}))
+                      .permute({1, 0, 2})
+                      .reshape({-1, 2});
+  const auto view = torch::arange(3).repeat({n});
+  CHECK((~a.pixels.windows.taps(uv, view, 48, 48).second).sum().item<int64_t>() > 100);
+  const auto ya = windows->forward(a, pts, dirs), yb = tables->forward(b, pts, dirs);
+  INFO("max |raw| " << yb.abs().max().item<double>());
+  CHECK(max_abs(ya, yb) < 1e-5 * (1 + yb.abs().max().item<double>()));
+  // Under autograd (training) the level tables stay.
+  torch::AutoGradMode grad(true);
+  CHECK(!windows->prepare(frame.inputs).pixels.alpha.window_table.defined());
 }

@@ -97,6 +97,32 @@ TEST_CASE("on a trained network, early ray termination stays within its bound of
   }
 }
 
+TEST_CASE("on a trained network, readout windows render every ray as the per-level tables do",
+          "[inference][windows]") {
+  torch::set_num_threads(1);
+  Frames windows(surface_config({"data.ratio=0.5"})), tables(surface_config({"data.ratio=0.5", "model.readout_windows=false"}));
+  REQUIRE(windows.config.model.readout_windows);  // on by default
+  for (int samples : {64, 16}) {
+    auto rc = windows.config.render;
+    rc.samples = samples;
+    for (size_t i = 0; i < std::min<size_t>(windows.dataset->size(), 4); ++i) {
+      const auto s = windows.dataset->load(i, 0);
+      torch::NoGradGuard no_grad;
+      const auto a = windows.model->prepare(windows.inputs(s)), b = tables.model->prepare(tables.inputs(s));
+      REQUIRE(a.pixels.alpha.window_table.defined());
+      REQUIRE(!b.pixels.alpha.window_table.defined());
+      const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
+      const auto fast = th::model::render_rays(*windows.model, a, rays, rc);
+      const auto exact = th::model::render_rays(*tables.model, b, rays, rc);
+      CAPTURE(samples, s.human, s.frame, s.target_view);
+      CHECK((fast.rgb - exact.rgb).abs().max().item<double>() <= 1e-3);
+      CHECK((fast.acc - exact.acc).abs().max().item<double>() <= 1e-3);
+      CHECK(fast.stats.density_points == exact.stats.density_points);
+      CHECK(exact.acc.max().item<double>() > 0.5);
+    }
+  }
+}
+
 TEST_CASE("a frame prepared once renders each of its views as preparing it for each does, bit for bit",
           "[inference][termination]") {
   torch::set_num_threads(1);
@@ -145,7 +171,8 @@ TEST_CASE("evaluation with the default shortcuts scores every image as the exact
   fs::create_directories(dir / "exact");
   const std::vector<std::string> limit{"eval.limit=6", "render.samples=64", "threads=1"};
   auto exact_overrides = limit;
-  exact_overrides.insert(exact_overrides.end(), {"render.termination_transmittance=0", "eval.reuse_frames=false"});
+  exact_overrides.insert(exact_overrides.end(),
+                         {"render.termination_transmittance=0", "eval.reuse_frames=false", "model.readout_windows=false"});
   th::eval::evaluate(surface_config(limit), torch::kCPU, trained_checkpoint(), dir / "fast");
   th::eval::evaluate(surface_config(exact_overrides), torch::kCPU, trained_checkpoint(), dir / "exact");
   const auto fast = read_rows(dir / "fast" / "per_image.csv"), exact = read_rows(dir / "exact" / "per_image.csv");

@@ -184,6 +184,8 @@ TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_m
   // Settings that do not change the trained function are not compared.
   auto direct = make_model(tiny_config({"model.exact_shortcuts=false"}));
   CHECK_NOTHROW(th::pipeline::load_weights(*direct, dir / "stored.pt"));
+  auto tables = make_model(tiny_config({"model.readout_windows=false"}));
+  CHECK_NOTHROW(th::pipeline::load_weights(*tables, dir / "stored.pt"));
 
   // A checkpoint without a stored config: its run's config.yaml (two folders up) is compared.
   fs::create_directories(dir / "run" / "checkpoints");
