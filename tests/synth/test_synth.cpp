@@ -124,7 +124,7 @@ TEST_CASE("shape directions mean what they say and joints follow the shape", "[s
   CHECK(height(shaped(0, 1.0).vertices) > height(base.vertices) + 0.04);
   // 1: girth: the waist ring gets wider.
   auto waist_width = [&](const torch::Tensor& v) {
-    auto mask = (v.select(1, 1) - 0.11).abs() < 0.02 & (bt.vertex_part == int(Part::Torso));
+    auto mask = ((v.select(1, 1) - 0.11).abs() < 0.02) & (bt.vertex_part == int(Part::Torso));
     return v.index({mask}).select(1, 0).max().item<double>();
   };
   CHECK(waist_width(shaped(1, 1.0).vertices) > waist_width(base.vertices) + 0.015);
