@@ -10,7 +10,8 @@
 // render.train_recompute=always, model.readout_windows=false) and glibc's malloc defaults, i.e.
 // what main did before these shortcuts, except for the changes that have no switch because they
 // only make the same arithmetic faster (the vectorised attention and DPaRF loops, colour without
-// a row copy): those are in both paths, so the speed-up understates the gain over main.
+// a row copy, the project's kernels compiled with OpenMP): those are in both paths, so the
+// speed-up understates the gain over main.
 // "default": the config as it is. The figures are appended, with the date, the machine and its
 // load, to --out.
 //   transhuman-bench-speed --config configs/demo.yaml --checkpoint runs/demo/checkpoints/latest.pt
@@ -334,7 +335,7 @@ int main(int argc, char** argv) {
   std::string exact;
   for (const auto& o : kExact) exact += (exact.empty() ? "" : ", ") + o;
   r.line("Exact: " + exact + ", glibc malloc defaults: main before issue 15, except the changes without a switch "
-         "(vectorised attention and DPaRF loops, colour without a row copy), which both paths have. Default: the config as it is, "
+         "(vectorised attention and DPaRF loops, colour without a row copy, OpenMP in the project's kernels), which both paths have. Default: the config as it is, "
          "malloc keeping freed memory (as the apps now do). Each path runs in a process of its own.");
   r.line("");
   for (const auto& section : sections) {

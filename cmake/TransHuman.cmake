@@ -8,6 +8,15 @@ set(TH_WARNINGS -Wall -Wextra -Wno-unused-parameter)
 add_library(th_pch STATIC ${PROJECT_SOURCE_DIR}/lib/core/pch.cpp)
 target_include_directories(th_pch SYSTEM PUBLIC ${TORCH_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
 target_link_libraries(th_pch PUBLIC ${TORCH_LIBRARIES})
+# ATen's at::parallel_for is a header template: in our own kernels it runs threads only when our
+# code is compiled with OpenMP (without it, it runs the whole range on the calling thread).
+# LibTorch's CPU builds use OpenMP; the flag travels to every target through th_pch.
+find_package(OpenMP)
+if(OpenMP_CXX_FOUND)
+  target_link_libraries(th_pch PUBLIC OpenMP::OpenMP_CXX)
+else()
+  message(WARNING "OpenMP not found: the project's own CPU kernels (at::parallel_for) will run on one thread")
+endif()
 target_compile_options(th_pch PRIVATE ${TH_WARNINGS})
 target_precompile_headers(th_pch PRIVATE <torch/torch.h>)
 

@@ -6,7 +6,11 @@
 #include <torch/cuda.h>
 #include <torch/utils.h>
 
+#include <ATen/Parallel.h>
+
 #include <algorithm>
+#include <mutex>
+#include <set>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
@@ -136,6 +140,16 @@ ScopedThreads::ScopedThreads(int threads) : torch_(torch::get_num_threads()), bl
 ScopedThreads::~ScopedThreads() {
   torch::set_num_threads(torch_);
   if (blas_ > 0) set_blas_threads(blas_);
+}
+
+int parallel_for_threads(int64_t n) {
+  std::mutex mutex;
+  std::set<int> seen;
+  at::parallel_for(0, n, 1, [&](int64_t, int64_t) {
+    std::lock_guard<std::mutex> lock(mutex);
+    seen.insert(at::get_thread_num());
+  });
+  return int(seen.size());
 }
 
 }  // namespace th::runtime

@@ -33,6 +33,12 @@ torch::Device select_device(const std::string& requested);
 // threads <= 0: one per core. Returns the number in effect.
 int set_threads(int threads);
 
+// How many threads at::parallel_for gives a loop of n iterations in the project's own code (its
+// kernels: sampling, attention, DPaRF, culling). ATen's parallel_for is a header template that
+// runs threads only where the caller is compiled with OpenMP (cmake/TransHuman.cmake): 1 means
+// it is not, and the kernels run on one core whatever the thread count.
+int parallel_for_threads(int64_t n);
+
 // OpenBLAS keeps a thread pool of its own beside LibTorch's (found at run time with dlsym, as
 // detect_blas does): its size, 0 when the loaded BLAS is not OpenBLAS.
 int blas_threads();

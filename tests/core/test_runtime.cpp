@@ -16,6 +16,16 @@ TEST_CASE("the BLAS LibTorch loaded is identified", "[runtime]") {
   CHECK_FALSE(info.slow);
 }
 
+TEST_CASE("the project's own kernels run on every LibTorch thread", "[runtime]") {
+  // Fails when lib/ is compiled without OpenMP: at::parallel_for then runs on one thread.
+  const int before = torch::get_num_threads();
+  torch::set_num_threads(2);
+  CHECK(th::runtime::parallel_for_threads(64) == 2);
+  torch::set_num_threads(1);
+  CHECK(th::runtime::parallel_for_threads(64) == 1);
+  torch::set_num_threads(before);
+}
+
 TEST_CASE("device selection follows the request", "[runtime]") {
   CHECK(th::runtime::select_device("cpu") == torch::Device(torch::kCPU));
   const auto dev = th::runtime::select_device("auto");
