@@ -188,54 +188,28 @@ std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::Tensor
 
 std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t H,
                                                   int64_t W) const {
-  TORCH_CHECK(uv.device().is_cpu() && uv.dim() == 2 && uv.size(1) == 2, "window taps: uv must be (M, 2) on CPU, got ",
-              uv.sizes());
-  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "window taps: view must be (M), got ", view.sizes());
-  const int64_t M = uv.size(0);
-  const auto uvc = uv.contiguous();
-  const auto vc = view.to(torch::kLong).contiguous();
-  Taps t{torch::empty({M, 4}, vc.options()), torch::empty({M, 4}, uv.options())};
-  auto inside = torch::empty({M}, vc.options().dtype(torch::kBool));
-  AT_DISPATCH_FLOATING_TYPES(uv.scalar_type(), "window_taps", [&] {
-    const scalar_t* p = uvc.data_ptr<scalar_t>();
-    const int64_t* vv = vc.data_ptr<int64_t>();
-    int64_t* ti = t.index.data_ptr<int64_t>();
+  TORCH_CHECK(uv.device().is_cpu(), "window taps: uv must be on CPU");
+  // grid_sample's 2 x 2 taps into the (V H W) rows of the whole images, then moved to the rows
+  // of the windows; a point with a tap outside its view's window gets row 0 and weight 0.
+  Taps t = multi_level_taps(uv, view, {{H, W}}, {0}, H, W);
+  const int64_t M = t.index.size(0), T_ = t.index.size(1), views = int64_t(offset.size());
+  auto inside = torch::empty({M}, t.index.options().dtype(torch::kBool));
+  int64_t* ti = t.index.data_ptr<int64_t>();
+  bool* in = inside.data_ptr<bool>();
+  AT_DISPATCH_FLOATING_TYPES(t.weight.scalar_type(), "window_taps", [&] {
     scalar_t* tw = t.weight.data_ptr<scalar_t>();
-    bool* in = inside.data_ptr<bool>();
-    // One axis as grid_sample reads it: clamp to the image (NaN reads pixel 0), then the pixel
-    // below and the next one (the last pixel twice at the border).
-    auto axis = [](scalar_t x, int64_t S, int64_t& i0, int64_t& i1, scalar_t& f) {
-      x = x >= scalar_t(0) ? std::min(x, static_cast<scalar_t>(S - 1)) : scalar_t(0);
-      const scalar_t lo = std::min(std::max(std::floor(x), scalar_t(0)), static_cast<scalar_t>(std::max<int64_t>(S - 2, 0)));
-      f = x - lo;
-      i0 = static_cast<int64_t>(lo);
-      i1 = std::min(i0 + 1, S - 1);
-    };
     at::parallel_for(0, M, 4096, [&](int64_t b, int64_t e) {
       for (int64_t m = b; m < e; ++m) {
-        int64_t ix0, ix1, iy0, iy1;
-        scalar_t fx, fy;
-        axis(p[2 * m], W, ix0, ix1, fx);
-        axis(p[2 * m + 1], H, iy0, iy1, fy);
-        const int64_t v = vv[m];
-        const bool ok = v >= 0 && v < int64_t(offset.size()) && ix0 >= x0[v] && ix1 < x0[v] + w[v] &&
-                        iy0 >= y0[v] && iy1 < y0[v] + h[v];
-        in[m] = ok;
-        int64_t* i = ti + 4 * m;
-        scalar_t* wt = tw + 4 * m;
-        if (!ok) {
-          for (int k = 0; k < 4; ++k) i[k] = 0, wt[k] = 0;
-          continue;
+        int64_t* i = ti + T_ * m;
+        bool ok = true;
+        for (int64_t k = 0; k < T_ && ok; ++k) {
+          const int64_t v = i[k] / (H * W), y = i[k] % (H * W) / W, x = i[k] % W;
+          ok = v >= 0 && v < views && x >= x0[v] && x < x0[v] + w[v] && y >= y0[v] && y < y0[v] + h[v];
+          if (ok) i[k] = offset[v] + (y - y0[v]) * w[v] + (x - x0[v]);
         }
-        const int64_t base = offset[v] - y0[v] * w[v] - x0[v];
-        i[0] = base + iy0 * w[v] + ix0;
-        i[1] = base + iy0 * w[v] + ix1;
-        i[2] = base + iy1 * w[v] + ix0;
-        i[3] = base + iy1 * w[v] + ix1;
-        wt[0] = (1 - fy) * (1 - fx);
-        wt[1] = (1 - fy) * fx;
-        wt[2] = fy * (1 - fx);
-        wt[3] = fy * fx;
+        in[m] = ok;
+        if (!ok)
+          for (int64_t k = 0; k < T_; ++k) i[k] = 0, tw[T_ * m + k] = 0;
       }
     });
   });

@@ -23,6 +23,15 @@ torch::Tensor view_ids(int64_t n, int64_t V, const torch::Device& device) {
   return torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(device)).repeat({n});
 }
 
+// The encoder levels a pixel stage keeps (fast sampling, or the fallback of readout windows).
+EncodedViews levels_of(const PixelStage& px) {
+  EncodedViews enc;
+  enc.levels = px.levels;
+  enc.images = px.images;
+  enc.geometry = px.geometry;
+  return enc;
+}
+
 }  // namespace
 
 TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
@@ -104,12 +113,9 @@ torch::Tensor TransHumanImpl::pixel_features_at(const PixelStage& px, const torc
   const auto n = uv.size(0), V = uv.size(1);
   const auto flat = uv.reshape({-1, 2});
   const auto view = view_ids(n, V, uv.device());
-  EncodedViews enc;
-  enc.levels = px.levels;
-  enc.images = px.images;
-  enc.geometry = px.geometry;
   return encoder
-      ->sample_pixel_features(enc, px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
+      ->sample_pixel_features(levels_of(px), px.geometry.stacked_level_taps(flat, view),
+                              px.geometry.image_taps(flat, view))
       .view({n, V, -1});
 }
 
@@ -125,11 +131,7 @@ torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadou
     if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
       const auto idx = (~inside).nonzero().flatten();
       const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
-      EncodedViews enc;
-      enc.levels = px.levels;
-      enc.images = px.images;
-      enc.geometry = px.geometry;
-      const auto p = encoder->sample_pixel_features(enc, px.geometry.stacked_level_taps(f, v),
+      const auto p = encoder->sample_pixel_features(levels_of(px), px.geometry.stacked_level_taps(f, v),
                                                     px.geometry.image_taps(f, v));
       out.index_copy_(0, idx, F::linear(p, readout.weight, readout.layer_bias));
     }
