@@ -16,6 +16,7 @@ int main(int argc, char** argv) {
     int limit = -1;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
+    th::app::add_precision_option(cli, options);
     th::app::add_force_option(cli, options);
     cli.add_option("--limit", limit, "evaluate only the first N images (quick look)")
         ->check(th::app::at_least(0));

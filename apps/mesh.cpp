@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
     th::app::ModelOptions model;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
+    th::app::add_precision_option(cli, options);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first")
         ->check(th::app::at_least(0));

@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
     std::string frames;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
+    th::app::add_precision_option(cli, options);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frames", frames, "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
     auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)")

@@ -36,6 +36,7 @@ int main(int argc, char** argv) {
     std::string rank_state_dir;
     th::app::add_common_options(cli, options);
     th::app::add_force_option(cli, options);
+    th::app::add_precision_option(cli, options);
     cli.add_flag("--resume", resume, "continue the run in --out from its latest checkpoint");
     cli.add_option("--max-steps", max_steps, "stop after this many steps in all (with a checkpoint)")
         ->check(th::app::at_least(0));

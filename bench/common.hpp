@@ -87,4 +87,30 @@ inline std::string load_average() {
   return a + " " + b + " " + c;
 }
 
+// The commit of the working tree (git rev-parse --short HEAD, "+" when it has changes),
+// "unknown" outside a git checkout.
+inline std::string git_commit() {
+  std::string out;
+  if (FILE* f = popen("git rev-parse --short HEAD 2>/dev/null && git status --porcelain -uno 2>/dev/null | head -1", "r")) {
+    char buf[256];
+    while (fgets(buf, sizeof buf, f)) out += buf;
+    pclose(f);
+  }
+  const auto nl = out.find('\n');
+  if (nl == std::string::npos) return "unknown";
+  return out.substr(0, nl) + (out.size() > nl + 1 ? "+" : "");
+}
+
+// The processor's model name (/proc/cpuinfo), "unknown" when it has none.
+inline std::string cpu_model() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0 && line.find(':') != std::string::npos) {
+      auto v = line.substr(line.find(':') + 1);
+      return v.substr(v.find_first_not_of(' '));
+    }
+  return "unknown";
+}
+
 }  // namespace th::bench

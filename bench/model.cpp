@@ -2,7 +2,10 @@
 // several chunk sizes, one training step on the default ray batch, and one 512 x 512 frame
 // rendered progressively, for 64 and 16 samples per ray. Synthetic inputs (random images, a
 // humanoid point body of 6890 vertices, 300 tokens); random weights.
-//   transhuman-bench-model [--threads N] [--out FILE] [--quick]
+//   transhuman-bench-model [--threads N] [--out FILE] [--quick] [--precision fp32-blas fp32 bf16 ...]
+// Each precision path (model/precision.hpp: fp32-blas = fp32 products through BLAS, fp32 = the
+// config default's fp32 products, bf16, auto) is measured in turn inside every round, so that
+// the paths see the same machine state.
 // Memory: peak resident set size of the process during the measured section, minus the
 // resident size before it (Linux VmHWM after resetting it through /proc/self/clear_refs).
 #include <CLI/CLI.hpp>
@@ -191,6 +194,9 @@ int main(int argc, char** argv) {
   cli.add_option("--render-chunk", render_chunk, "render.chunk_points for the image");
   std::vector<std::string> sections{"points", "train", "render"};
   cli.add_option("--sections", sections, "which parts to run: points train render");
+  std::vector<std::string> precisions{"fp32"};
+  cli.add_option("--precision", precisions, "precision paths side by side: fp32-blas fp32 bf16 auto")
+      ->check(CLI::IsMember({"fp32-blas", "fp32", "bf16", "auto"}));
   bool system_malloc = false;
   cli.add_flag("--system-malloc", system_malloc, "keep glibc's default mmap use for large blocks");
   CLI11_PARSE(cli, argc, argv);
@@ -203,6 +209,10 @@ int main(int argc, char** argv) {
   const int nthreads = runtime::set_threads(threads);
   const int64_t size = quick ? 128 : 512;
 
+  auto products_of = [](const std::string& path) {
+    if (path == "fp32-blas") return model::resolve_products("fp32", "blas", torch::kCPU);
+    return model::resolve_products(path, "auto", torch::kCPU);
+  };
   Report r;
   r.line("# TransHuman model benchmark");
   r.line("");
@@ -214,6 +224,16 @@ int main(int argc, char** argv) {
   const auto loadavg = bench::load_average;
   r.line("Machine: " + std::to_string(std::thread::hardware_concurrency()) +
          " cores shared with other jobs; load average at start " + loadavg() + ".");
+  {
+    std::string why;
+    std::string paths;
+    for (const auto& p : precisions) {
+      model::resolve_products(p == "fp32-blas" ? "fp32" : p, p == "fp32-blas" ? "blas" : "auto", torch::kCPU, &why);
+      paths += (paths.empty() ? "" : "; ") + p + ": " + why;
+    }
+    r.line("Processor: " + bench::cpu_model() + ", bf16: " + runtime::detect_cpu_bf16().describe() + ". Precision paths: " +
+           paths + ".");
+  }
   r.line(std::string("Allocator: glibc malloc") + (system_malloc ? " (defaults)" : " with M_MMAP_MAX=0, no trimming") + ".");
   r.line("Memory: peak bytes of live LibTorch CPU tensors allocated in the measured section (c10 memory-reporting "
          "hook on the allocator); in brackets the resident-set growth (VmHWM after a reset via /proc/self/clear_refs "
@@ -250,8 +270,8 @@ int main(int argc, char** argv) {
   if (wanted("points")) {
   r.line("## Per-point network (DPaRF + FDI + heads, 3 views), points within 0.1 m of the body");
   r.line("");
-  r.line("| chunk | forward pts/s | density-first pts/s | fwd+bwd pts/s (one chunk, graph kept) | training pts/s (no-grad fwd + recompute + bwd, 65536 points per call) | peak MiB training |");
-  r.line("|---|---|---|---|---|---|");
+  r.line("| chunk | precision | forward pts/s | density-first pts/s | fwd+bwd pts/s (one chunk, graph kept) | training pts/s (no-grad fwd + recompute + bwd, 65536 points per call) | peak MiB training | forward, fwd+bwd vs " + precisions.front() + " |");
+  r.line("|---|---|---|---|---|---|---|---|");
   {
     net->train();
     torch::Tensor dirs;
@@ -283,10 +303,13 @@ int main(int argc, char** argv) {
     cache_g.pixels.color.image_table = cache_ng.pixels.color.image_table;
     // Rounds over all chunk sizes; each cell keeps its best round (the machine is shared).
     struct Cell { double fwd = 0, dfirst = 0, fb = 0, train = 0, mem = 0; render::Profile profile; double fwd_s = 0; };
-    std::map<int64_t, Cell> best;
+    std::map<std::pair<int64_t, size_t>, Cell> best;
     for (int round = 0; round < rounds; ++round)
-    for (const int64_t chunk : chunks) {
+    for (const int64_t chunk : chunks)
+    for (size_t path = 0; path < precisions.size(); ++path) {
       if (chunk > pts.size(0)) continue;
+      net->set_products(products_of(precisions[path]));
+      const auto key = std::make_pair(chunk, path);
       auto rate = [&](auto&& fn) {
         int64_t done = 0;
         fn(pts.narrow(0, 0, chunk), dirs.narrow(0, 0, chunk));  // warm-up
@@ -307,7 +330,7 @@ int main(int argc, char** argv) {
         fwd = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward(cache_ng, p, d); });
         const double fwd_seconds = seconds_since(t_fwd);
         net->set_profile(nullptr);
-        if (fwd > best[chunk].fwd) best[chunk].profile = fwd_profile, best[chunk].fwd_s = fwd_seconds;
+        if (fwd > best[key].fwd) best[key].profile = fwd_profile, best[key].fwd_s = fwd_seconds;
         dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) { net->forward_density_first(cache_ng, p, d); });
       }
       fb = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
@@ -332,16 +355,18 @@ int main(int argc, char** argv) {
       train = reps * pts.size(0) / seconds_since(t0);
       const double train_mem = mem.tensor_mib();
       net->zero_grad();
-      auto& c = best[chunk];
+      auto& c = best[key];
       c.fwd = std::max(c.fwd, fwd), c.dfirst = std::max(c.dfirst, dfirst), c.fb = std::max(c.fb, fb);
       c.train = std::max(c.train, train), c.mem = std::max(c.mem, train_mem);
-      std::cout << "  round " << round << " chunk " << chunk << ": " << fmt(fwd, 0) << " " << fmt(dfirst, 0) << " "
+      std::cout << "  round " << round << " chunk " << chunk << " " << precisions[path] << ": " << fmt(fwd, 0) << " " << fmt(dfirst, 0) << " "
                 << fmt(fb, 0) << " " << fmt(train, 0) << std::endl;
     }
-    for (auto& [chunk, c] : best) {
-      r.line("| " + std::to_string(chunk) + " | " + fmt(c.fwd, 0) + " | " + fmt(c.dfirst, 0) + " | " + fmt(c.fb, 0) + " | " +
-             fmt(c.train, 0) + " | " + fmt(c.mem, 0) + " |");
-      stage_lines.push_back("chunk " + std::to_string(chunk) + ":");
+    for (auto& [key, c] : best) {
+      const auto& base = best[{key.first, 0}];
+      r.line("| " + std::to_string(key.first) + " | " + precisions[key.second] + " | " + fmt(c.fwd, 0) + " | " +
+             fmt(c.dfirst, 0) + " | " + fmt(c.fb, 0) + " | " + fmt(c.train, 0) + " | " + fmt(c.mem, 0) + " | " +
+             fmt(c.fwd / base.fwd, 2) + "x, " + fmt(c.fb / base.fb, 2) + "x |");
+      stage_lines.push_back("chunk " + std::to_string(key.first) + ", " + precisions[key.second] + ":");
       shares_into(stage_lines.back(), c.profile, c.fwd_s);
     }
     r.line("");
@@ -356,10 +381,12 @@ int main(int argc, char** argv) {
   }
 
   // ---- training step and rendering, 64 and 16 samples -----------------------------------------
-  for (const int samples : {64, 16}) {
+  for (const int samples : {64, 16})
+  for (const auto& precision : precisions) {
+    net->set_products(products_of(precision));
     RenderConfig rcs = rc;
     rcs.samples = samples;
-    r.line("## " + std::to_string(samples) + " samples per ray");
+    r.line("## " + std::to_string(samples) + " samples per ray, " + precision);
     r.line("");
     if (wanted("train")) {
       net->train();

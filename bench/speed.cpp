@@ -1,27 +1,35 @@
-// What a user waits for (issue 15), the exact and the default paths side by side in one run,
-// on a trained checkpoint and the dataset of its config:
+// What a user waits for, several paths side by side in one run, on a trained checkpoint and the
+// dataset of its config:
 //   view   one test view at data.ratio 1 (512 x 512 on the synthetic data), 64 and 16 samples per
 //          ray: seconds to prepare the frame and to render it, points evaluated, peak memory, and
 //          the largest per-ray difference of the default image from the exact one;
 //   orbit  36 orbit views of one frame at that size (transhuman-render's path);
 //   train  seconds per training step at the config (after a warm-up);
 //   eval   the evaluation of the config's setting, every image (transhuman-eval's path).
-// "exact": the issue's switches off (render.termination_transmittance=0, eval.reuse_frames=false,
-// render.train_recompute=always, model.readout_windows=false) and glibc's malloc defaults, i.e.
-// what main did before these shortcuts, except for the changes that have no switch because they
-// only make the same arithmetic faster (the vectorised attention and DPaRF loops, colour without
-// a row copy, the project's kernels compiled with OpenMP): those are in both paths, so the
-// speed-up understates the gain over main.
-// "default": the config as it is. The figures are appended, with the date, the machine and its
-// load, to --out.
+// Paths (--paths, the first is the reference of the speed-ups and differences):
+// "exact": the speed switches off (render.termination_transmittance=0, eval.reuse_frames=false,
+// render.train_recompute=always, model.readout_windows=false), fp32 products through BLAS and
+// glibc's malloc defaults, except for the changes that have no switch because they only make
+// the same arithmetic faster (the vectorised attention and DPaRF loops, colour without a row
+// copy, the project's kernels compiled with OpenMP).
+// "blas": the config with precision=fp32 and fp32 products through BLAS.
+// "fp32", "bf16", "auto": the config with that precision (fp32 products as the config says).
+// "default": the config as it is.
+// Every path runs in a process of its own; with --repeat N the paths alternate N times. The
+// figures are appended, with the date, the machine and its load, to --out.
 //   transhuman-bench-speed --config configs/demo.yaml --checkpoint runs/demo/checkpoints/latest.pt
 //                          [--out bench/results/speed.md] [--sections view orbit train eval]
+//                          [--paths blas fp32 bf16] [--repeat 2]
 #include <CLI/CLI.hpp>
 #include <torch/torch.h>
 
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/core.hpp>
 #include <unistd.h>
 
+#include <cmath>
 #include <ctime>
+#include <limits>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
@@ -53,12 +61,29 @@ namespace {
 const std::vector<std::string> kExact{"render.termination_transmittance=0", "eval.reuse_frames=false",
                                       "render.train_recompute=always", "model.readout_windows=false"};
 
+// The config overrides of a path.
+std::vector<std::string> path_overrides(const std::string& path) {
+  if (path == "exact") {
+    auto o = kExact;
+    o.push_back("precision=fp32");
+    o.push_back("fp32_products=blas");
+    return o;
+  }
+  if (path == "blas") return {"precision=fp32", "fp32_products=blas"};
+  if (path == "fp32" || path == "bf16" || path == "auto") return {"precision=" + path};
+  if (path == "default") return {};
+  throw std::runtime_error("unknown path '" + path + "' (exact, blas, fp32, bf16, auto, default)");
+}
+
 struct Setup {
   fs::path config, checkpoint, scratch;
   std::vector<std::string> overrides;
-  Config load(std::vector<std::string> more = {}, bool exact = false) const {
+  std::string path, reference;  // this child's path and the reference path (the first)
+  bool is_reference() const { return path == reference; }
+  Config load(std::vector<std::string> more = {}) const {
     auto all = overrides;
-    if (exact) all.insert(all.end(), kExact.begin(), kExact.end());
+    const auto p = path_overrides(path);
+    all.insert(all.end(), p.begin(), p.end());
     all.insert(all.end(), more.begin(), more.end());
     return config::load<Config>(config, all);
   }
@@ -75,15 +100,14 @@ struct Rows {
   }
 };
 
-const char* path_name(bool fast) { return fast ? "default" : "exact"; }
-
-void view_section(const Setup& setup, bool fast, Rows& rows, const std::vector<int>& view_samples) {
-  const Config base = setup.load({"data.ratio=1"}, !fast);
+void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_samples) {
+  const Config base = setup.load({"data.ratio=1"});
   const auto smpl = data::load_body_model(base.data);
   const data::Dataset dataset(base.data, base.eval.setting, data::Dataset::Mode::Test, smpl);
   model::TransHuman net(base.model, base.render.cull_distance);
   pipeline::load_weights(*net, setup.checkpoint, base.eval.model_mismatch == "warn");
   net->eval();
+  net->set_products(model::resolve_products(base.precision, base.fp32_products, torch::kCPU));
   pipeline::Tokens tokens(base.model.grouping, smpl->v_template);
   const auto sample = dataset.load(0, 0);
   const auto inputs = pipeline::frame_inputs(sample, smpl->v_template, tokens.labels(sample.body), torch::kCPU);
@@ -106,7 +130,7 @@ void view_section(const Setup& setup, bool fast, Rows& rows, const std::vector<i
   rows.add("what", 0, sample.human + " frame " + std::to_string(sample.frame) + " view " +
                           std::to_string(sample.target_view) + ", " + std::to_string(sample.target_image.size(1)) +
                           "x" + std::to_string(sample.target_image.size(0)) + ", " + std::to_string(rays.size()) +
-                          " in-box rays; frame preparation, " + path_name(fast) + " path: " + fmt(prepare, 2) + " s" +
+                          " in-box rays; frame preparation, " + setup.path + " path: " + fmt(prepare, 2) + " s" +
                           prepare_stages + ", peak " + fmt(prepare_mib, 0) + " MiB tensors, of which " +
                           fmt(cache.nbytes() / 1048576.0, 0) + " MiB stay in the frame cache");
   for (int samples : view_samples) {
@@ -119,38 +143,40 @@ void view_section(const Setup& setup, bool fast, Rows& rows, const std::vector<i
     const auto img = model::render_rays(*net, cache, rays, rc, &profile);
     const double sec = seconds_since(t0);
     net->set_profile(nullptr);
-    const fs::path exact_file = setup.scratch / ("view_exact_" + std::to_string(samples) + ".pt");
+    const fs::path reference_file = setup.scratch / ("view_" + setup.reference + "_" + std::to_string(samples) + ".pt");
     std::string diff = "- | -";
-    if (!fast) {
-      torch::save(std::vector<torch::Tensor>{img.rgb, img.acc}, exact_file.string());
+    if (setup.is_reference()) {
+      torch::save(std::vector<torch::Tensor>{img.rgb, img.acc}, reference_file.string());
     } else {
-      std::vector<torch::Tensor> exact;
-      torch::load(exact, exact_file.string());
-      diff = fmt((img.rgb - exact[0]).abs().max().item<double>() * 1e3, 3) + "e-3 | " +
-             fmt((img.acc - exact[1]).abs().max().item<double>() * 1e3, 3) + "e-3";
+      std::vector<torch::Tensor> ref;
+      torch::load(ref, reference_file.string());
+      const auto drgb = (img.rgb - ref[0]).abs(), dacc = (img.acc - ref[1]).abs();
+      diff = fmt(drgb.max().item<double>() * 1e3, 3) + "e-3 (mean " + fmt(drgb.mean().item<double>() * 1e3, 3) +
+             "e-3) | " + fmt(dacc.max().item<double>() * 1e3, 3) + "e-3 (mean " +
+             fmt(dacc.mean().item<double>() * 1e3, 3) + "e-3)";
     }
     const auto& st = img.stats;
     std::string stages;
     for (const auto& [stage, seconds] : profile.seconds) stages += stage + " " + fmt(seconds, 2) + ", ";
     rows.add(std::to_string(samples), sec + prepare,
-             std::to_string(samples) + " | " + path_name(fast) + " | " + fmt(sec, 2) + " | " + fmt(prepare, 2) + " | " +
+             std::to_string(samples) + " | " + setup.path + " | " + fmt(sec, 2) + " | " + fmt(prepare, 2) + " | " +
                  fmt(sec + prepare, 2) + " | " + std::to_string(st.density_points) + " | " +
                  std::to_string(st.color_points) + " | " + std::to_string(st.terminated_points) + " | " +
                  fmt(mem.tensor_mib(), 0) + " | " + diff + " | " + stages.substr(0, stages.size() - 2));
   }
 }
 
-void orbit_section(const Setup& setup, bool fast, Rows& rows, int views) {
-  const Config c = setup.load({"data.ratio=1"}, !fast);
+void orbit_section(const Setup& setup, Rows& rows, int views) {
+  const Config c = setup.load({"data.ratio=1"});
   const inference::Session session(c, torch::kCPU, setup.checkpoint);
   inference::VideoRequest request;
   request.orbit_views = views;
   request.force = true;
   request.contact_sheet_frames = 0;
   const auto t0 = Clock::now();
-  const auto summary = inference::render_video(session, request, setup.scratch / (std::string("orbit_") + path_name(fast)));
+  const auto summary = inference::render_video(session, request, setup.scratch / ("orbit_" + setup.path));
   const double sec = seconds_since(t0);
-  rows.add("orbit", sec, std::string(path_name(fast)) + " | " + std::to_string(summary.rendered) + " | " + fmt(sec, 1) +
+  rows.add("orbit", sec, setup.path + " | " + std::to_string(summary.rendered) + " | " + fmt(sec, 1) +
                              " | " + fmt(sec / std::max(summary.rendered, 1), 2));
 }
 
@@ -173,50 +199,86 @@ std::vector<torch::Tensor> weights_of(const Config& c, const fs::path& checkpoin
   return out;
 }
 
-void train_section(const Setup& setup, bool fast, Rows& rows, int steps) {
+void train_section(const Setup& setup, Rows& rows, int steps) {
   const Config c = setup.load({"train.log_every_steps=" + std::to_string(steps), "train.val_views=0",
-                               "train.save_every_epochs=0"},
-                              !fast);
-  const fs::path dir = setup.scratch / (std::string("train_") + path_name(fast));
+                               "train.save_every_epochs=0"});
+  const fs::path dir = setup.scratch / ("train_" + setup.path);
   fs::remove_all(dir);
   train::train(c, torch::kCPU, {dir, false, 2 * steps});
   const double sec = step_seconds(dir / "metrics.jsonl");
   std::string same = "-";
-  if (fast) {
+  if (!setup.is_reference()) {
     const auto a = weights_of(c, dir / "checkpoints" / "latest.pt");
-    const auto b = weights_of(c, setup.scratch / "train_exact" / "checkpoints" / "latest.pt");
+    const auto b = weights_of(c, setup.scratch / ("train_" + setup.reference) / "checkpoints" / "latest.pt");
     size_t differing = 0;
-    for (size_t i = 0; i < a.size(); ++i) differing += !torch::equal(a[i], b[i]);
-    same = differing == 0 ? "identical to exact" : std::to_string(differing) + " tensors differ";
+    double largest = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      differing += !torch::equal(a[i], b[i]);
+      largest = std::max(largest, (a[i] - b[i]).abs().max().item<double>());
+    }
+    same = differing == 0 ? "identical to " + setup.reference
+                          : std::to_string(differing) + " tensors differ from " + setup.reference + " (largest " +
+                                fmt(largest * 1e6, 2) + "e-6)";
   }
-  rows.add("train", sec, std::string(path_name(fast)) + " | " + fmt(sec, 3) + " | " + fmt(1 / sec, 3) + " | " + same);
+  rows.add("train", sec, setup.path + " | " + fmt(sec, 3) + " | " + fmt(1 / sec, 3) + " | " + same);
 }
 
-void eval_section(const Setup& setup, bool fast, Rows& rows) {
-  const Config c = setup.load({"eval.save_images=false"}, !fast);
-  const fs::path dir = setup.scratch / (std::string("eval_") + path_name(fast));
+// PSNR of the prediction in evaluation panel b against the one in panel a (8-bit PNGs). The
+// prediction is the panel's first tile, below an 18-pixel caption strip (pipeline::panel); the
+// synthetic data's images are square, so the tile is as wide as it is high.
+double psnr_between(const fs::path& a, const fs::path& b) {
+  const cv::Mat x = cv::imread(a.string()), y = cv::imread(b.string());
+  if (x.empty() || y.empty() || x.size() != y.size() || x.rows <= 18 || x.cols < x.rows - 18)
+    throw std::runtime_error("cannot compare " + a.string() + " and " + b.string());
+  const cv::Rect tile(0, 18, x.rows - 18, x.rows - 18);
+  cv::Mat d;
+  cv::absdiff(x(tile), y(tile), d);
+  d.convertTo(d, CV_64F, 1.0 / 255);
+  const double mse = cv::mean(d.mul(d))[0];
+  return mse == 0 ? std::numeric_limits<double>::infinity() : -10 * std::log10(mse);
+}
+
+void eval_section(const Setup& setup, Rows& rows, bool images) {
+  const Config c = setup.load({std::string("eval.save_images=") + (images ? "true" : "false")});
+  const fs::path dir = setup.scratch / ("eval_" + setup.path);
   fs::remove_all(dir);
   fs::create_directories(dir);
   const auto t0 = Clock::now();
   const auto s = eval::evaluate(c, torch::kCPU, setup.checkpoint, dir);
   const double sec = seconds_since(t0);
-  const fs::path psnr_file = setup.scratch / "eval_exact_psnr.txt";
+  const fs::path psnr_file = setup.scratch / ("eval_" + setup.reference + "_scores.txt");
   int64_t points = 0;
   for (const auto& i : s.per_image) points += i.evaluated_points;
-  std::string worst = "-";
-  if (!fast) {
+  std::string worst = "- | - | -";
+  if (setup.is_reference()) {
     std::ofstream f(psnr_file);
+    f << std::setprecision(17) << s.psnr << ' ' << s.ssim << '\n';
     for (const auto& i : s.per_image) f << std::setprecision(17) << i.psnr << '\n';
   } else {
     std::ifstream f(psnr_file);
-    double w = 0, v = 0;
+    double w = 0, v = 0, ref_psnr = 0, ref_ssim = 0;
+    f >> ref_psnr >> ref_ssim;
     for (const auto& i : s.per_image) {
-      if (!(f >> v)) throw std::runtime_error("fewer exact images than default ones in " + psnr_file.string());
+      if (!(f >> v)) throw std::runtime_error("fewer reference images than " + setup.path + " ones in " + psnr_file.string());
       w = std::max(w, std::abs(i.psnr - v));
     }
-    worst = fmt(w, 4) + " dB";
+    worst = fmt(w, 4) + " dB (mean " + fmt(s.psnr - ref_psnr, 4) + " dB, SSIM " + fmt(s.ssim - ref_ssim, 5) + ")";
+    // Each rendered panel against the reference path's (8-bit PNGs).
+    std::string render_psnr = "-";
+    if (images) {
+      double lowest = std::numeric_limits<double>::infinity();
+      int compared = 0;
+      for (const auto& e : fs::directory_iterator(dir / "images")) {
+        const auto other = setup.scratch / ("eval_" + setup.reference) / "images" / e.path().filename();
+        if (!fs::exists(other)) continue;
+        lowest = std::min(lowest, psnr_between(other, e.path()));
+        ++compared;
+      }
+      render_psnr = compared ? fmt(lowest, 1) + " dB (" + std::to_string(compared) + " panels)" : "no panels";
+    }
+    worst += " | " + render_psnr + " | " + setup.reference;
   }
-  rows.add("eval", sec, std::string(path_name(fast)) + " | " + std::to_string(s.images) + " | " + fmt(sec, 1) + " | " +
+  rows.add("eval", sec, setup.path + " | " + std::to_string(s.images) + " | " + fmt(sec, 1) + " | " +
                             fmt(sec / std::max(s.images, 1), 3) + " | " + fmt(s.psnr, 3) + " | " + fmt(s.ssim, 4) +
                             " | " + std::to_string(points) + " | " + worst);
 }
@@ -245,7 +307,7 @@ void section_head(bench::Report& r, const std::string& section, const Setup& set
     r.line("## One test view at data.ratio 1");
     r.line("");
     r.line("| samples | path | render s | frame preparation s | view s | points evaluated | colour points | skipped "
-           "by termination | peak MiB tensors (render, frame cache held) | max abs rgb diff | max abs acc diff | seconds per stage | "
+           "by termination | peak MiB tensors (render, frame cache held) | per-ray abs rgb diff | per-ray abs acc diff | seconds per stage | "
            "speed-up (view) |");
     r.line("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
   } else if (section == "orbit") {
@@ -263,8 +325,9 @@ void section_head(bench::Report& r, const std::string& section, const Setup& set
     r.line("## Evaluation of the config's setting (transhuman-eval, every image)");
     r.line("");
     r.line("| path | images | seconds | seconds per image | PSNR | SSIM | points evaluated | largest per-image PSNR "
-           "difference | speed-up |");
-    r.line("|---|---|---|---|---|---|---|---|---|");
+           "difference (mean PSNR, SSIM difference) | lowest PSNR of a rendered image against the reference path's | "
+           "reference path | speed-up |");
+    r.line("|---|---|---|---|---|---|---|---|---|---|---|");
   }
 }
 
@@ -277,13 +340,16 @@ std::string quote(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App cli{"TransHuman speed benchmark: exact and default paths side by side (issue 15)"};
+  CLI::App cli{"TransHuman speed benchmark: several paths side by side (exact, blas, fp32, bf16, default)"};
   Setup setup;
   int threads = 0, orbit_views = 36, train_steps = 10;
   fs::path out = "bench/results/speed.md", rows_file;
   std::vector<std::string> sections{"view", "orbit", "train", "eval"};
   std::vector<int> view_samples{64, 16};
   std::string child_path;
+  std::vector<std::string> paths{"exact", "default"};
+  int repeat = 1;
+  bool eval_images = false;
   cli.add_option("--config", setup.config, "the config (the checkpoint's)")->required();
   cli.add_option("--checkpoint", setup.checkpoint, "a trained checkpoint")->required();
   cli.add_option("--out", out, "append the figures to this markdown file (empty: print only)");
@@ -293,22 +359,27 @@ int main(int argc, char** argv) {
   cli.add_option("--train-steps", train_steps, "training steps measured (after as many of warm-up)");
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
   cli.add_option("--scratch", setup.scratch, "scratch folder (default: a temporary one, removed at the end)");
-  cli.add_option("--child", child_path, "(internal) run one path of the sections: exact or default");
+  cli.add_option("--paths", paths, "paths side by side; the first is the reference: exact blas fp32 bf16 auto default");
+  cli.add_option("--repeat", repeat, "rounds of all paths, alternating")->check(CLI::Range(1, 10));
+  cli.add_flag("--eval-images", eval_images, "evaluation saves its images, compared with the reference path's");
+  cli.add_option("--child", child_path, "(internal) run one path of the sections");
+  cli.add_option("--reference", setup.reference, "(internal) the reference path");
   cli.add_option("--rows", rows_file, "(internal) where a child writes its rows");
   cli.add_option("overrides", setup.overrides, "config overrides key=value");
   CLI11_PARSE(cli, argc, argv);
 
+  for (const auto& p : paths) path_overrides(p);  // an unknown path fails here
   if (!child_path.empty()) {  // one path, in a process of its own
-    const bool fast = child_path == "default";
-    if (fast) runtime::keep_freed_memory();  // as the apps do now; the exact path: glibc defaults
+    setup.path = child_path;
+    if (child_path != "exact") runtime::keep_freed_memory();  // as the apps do; exact: glibc defaults
     runtime::set_threads(threads);
     Rows rows{std::ofstream(rows_file)};
     try {
       for (const auto& s : sections) {
-        if (s == "view") view_section(setup, fast, rows, view_samples);
-        else if (s == "orbit") orbit_section(setup, fast, rows, orbit_views);
-        else if (s == "train") train_section(setup, fast, rows, train_steps);
-        else if (s == "eval") eval_section(setup, fast, rows);
+        if (s == "view") view_section(setup, rows, view_samples);
+        else if (s == "orbit") orbit_section(setup, rows, orbit_views);
+        else if (s == "train") train_section(setup, rows, train_steps);
+        else if (s == "eval") eval_section(setup, rows, eval_images);
         else throw std::runtime_error("unknown section '" + s + "' (view, orbit, train, eval)");
       }
     } catch (const std::exception& e) {
@@ -325,52 +396,66 @@ int main(int argc, char** argv) {
   const std::time_t now = std::time(nullptr);
   char date[32];
   std::strftime(date, sizeof date, "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
-  r.line("# Speed: exact and default paths (" + std::string(date) + ")");
+  std::string names;
+  for (const auto& p : paths) names += (names.empty() ? "" : ", ") + p;
+  r.line("# Speed: paths " + names + " (" + std::string(date) + ")");
   r.line("");
-  r.line("Config " + setup.config.string() + ", checkpoint " + setup.checkpoint.string() + "; LibTorch " +
-         std::string(TORCH_VERSION) + ", BLAS " + runtime::detect_blas().name + ", threads " +
-         (threads > 0 ? std::to_string(threads) : "one per core") + "; " +
-         std::to_string(std::thread::hardware_concurrency()) + " cores, load average at start " + bench::load_average() +
-         ".");
+  const auto commit = bench::git_commit();
+  r.line("Config " + setup.config.string() + ", checkpoint " + setup.checkpoint.string() + "; commit " + commit +
+         "; LibTorch " + std::string(TORCH_VERSION) + ", BLAS " + runtime::detect_blas().name + ", threads " +
+         (threads > 0 ? std::to_string(threads) : "one per core") + "; processor " + bench::cpu_model() + " (bf16: " +
+         runtime::detect_cpu_bf16().describe() + "), " + std::to_string(std::thread::hardware_concurrency()) +
+         " cores, load average at start " + bench::load_average() + ".");
   std::string exact;
-  for (const auto& o : kExact) exact += (exact.empty() ? "" : ", ") + o;
-  r.line("Exact: " + exact + ", glibc malloc defaults: main before issue 15, except the changes without a switch "
-         "(vectorised attention and DPaRF loops, colour without a row copy, OpenMP in the project's kernels), which both paths have. Default: the config as it is, "
-         "malloc keeping freed memory (as the apps now do). Each path runs in a process of its own.");
+  for (const auto& o : path_overrides("exact")) exact += (exact.empty() ? "" : ", ") + o;
+  r.line("Paths: exact = " + exact + ", glibc malloc defaults (the changes without a switch - vectorised attention "
+         "and DPaRF loops, colour without a row copy, OpenMP in the project's kernels - are in every path); blas = "
+         "precision=fp32, fp32_products=blas; fp32 / bf16 / auto = that precision; default = the config as it is. "
+         "Every path but exact keeps freed memory (as the apps do). Each run of a path is a process of its own; "
+         "with --repeat the paths alternate (" + std::to_string(repeat) + " round" + (repeat > 1 ? "s" : "") +
+         "). Speed-ups and differences are against " + paths.front() + " of the same round.");
   r.line("");
   for (const auto& section : sections) {
-    std::map<std::string, std::vector<Row>> by_path;
-    for (const char* path : {"exact", "default"}) {
-      const fs::path file = setup.scratch / (section + "_" + path + ".rows");
-      std::string cmd = quote(fs::read_symlink("/proc/self/exe").string()) + " --child " + path + " --rows " +
+    std::vector<std::pair<std::string, std::vector<Row>>> runs;  // (path, rows) in run order
+    for (int round = 0; round < repeat; ++round)
+    for (const auto& path : paths) {
+      const fs::path file = setup.scratch / (section + "_" + path + "_" + std::to_string(round) + ".rows");
+      std::string cmd = quote(fs::read_symlink("/proc/self/exe").string()) + " --child " + path + " --reference " +
+                        quote(paths.front()) + " --rows " +
                         quote(file.string()) + " --config " + quote(setup.config.string()) + " --checkpoint " +
                         quote(setup.checkpoint.string()) + " --scratch " + quote(setup.scratch.string()) +
                         " --sections " + section + " --orbit-views " + std::to_string(orbit_views) +
                         " --train-steps " + std::to_string(train_steps) + " --threads " + std::to_string(threads) +
                         " --view-samples";
       for (int v : view_samples) cmd += " " + std::to_string(v);
+      if (eval_images) cmd += " --eval-images";
       cmd += " --";
       for (const auto& o : setup.overrides) cmd += " " + quote(o);
-      std::cout << "[" << section << ", " << path << "]" << std::endl;
+      std::cout << "[" << section << ", " << path << ", round " << round + 1 << "]" << std::endl;
       if (std::system(cmd.c_str()) != 0) {
         std::cerr << "transhuman-bench-speed: the " << path << " run of section " << section << " failed" << std::endl;
         if (own_scratch) fs::remove_all(setup.scratch);
         return 1;
       }
-      by_path[path] = read_rows(file);
+      runs.emplace_back(path, read_rows(file));
     }
     section_head(r, section, setup, orbit_views, train_steps);
-    std::map<std::string, double> exact_seconds;
-    for (const auto& row : by_path["exact"]) exact_seconds[row.key] = row.seconds;
     std::string what;
-    for (const auto& path : {"exact", "default"})
-      for (const auto& row : by_path[path]) {
+    std::map<std::string, double> reference_seconds;
+    for (size_t i = 0; i < runs.size(); ++i) {
+      const auto& [path, rows] = runs[i];
+      if (i % paths.size() == 0) {  // a new round: its reference path's figures
+        reference_seconds.clear();
+        for (const auto& row : rows) reference_seconds[row.key] = row.seconds;
+      }
+      for (const auto& row : rows) {
         if (row.key == "what") {
-          what += (what.empty() ? "" : "; ") + row.cells;
+          if (i < paths.size()) what += (what.empty() ? "" : "; ") + row.cells;
           continue;
         }
-        r.line("| " + row.cells + " | " + fmt(exact_seconds[row.key] / std::max(row.seconds, 1e-9), 2) + "x |");
+        r.line("| " + row.cells + " | " + fmt(reference_seconds[row.key] / std::max(row.seconds, 1e-9), 2) + "x |");
       }
+    }
     if (!what.empty()) r.line("\nThe view: " + what + ".");
     r.line("");
   }

@@ -26,6 +26,13 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
 }
 
+void add_precision_option(CLI::App& cli, CommonOptions& o) {
+  cli.add_option("--precision", o.precision,
+                 "matrix products in fp32, bf16, or auto: bf16 where the CPU has native bf16 dot products "
+                 "(overrides the config's 'precision')")
+      ->check(CLI::IsMember({"fp32", "bf16", "auto"}));
+}
+
 namespace {
 
 // A CLI11 check of a number: `ok` decides, `requirement` is what the message says it must be.
@@ -113,6 +120,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
 
   std::vector<std::string> overrides = o.overrides;
   if (!o.device.empty()) overrides.push_back("device=" + o.device);
+  if (!o.precision.empty()) overrides.push_back("precision=" + o.precision);
   if (o.threads >= 0) overrides.push_back("threads=" + std::to_string(o.threads));
 
   RunContext ctx;

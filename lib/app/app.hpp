@@ -20,6 +20,7 @@ struct CommonOptions {
   std::vector<std::string> overrides;  // key.sub=value
   std::string out;                     // run directory
   std::string device;                  // overrides config `device` when set
+  std::string precision;               // overrides config `precision` when set
   int threads = -1;                    // overrides config `threads` when >= 0
   bool dry_run = false;
   bool verbose = false;
@@ -34,6 +35,9 @@ struct CommonOptions {
 // Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional
 // key=value overrides on `cli`.
 void add_common_options(CLI::App& cli, CommonOptions& options);
+
+// Registers --precision (the commands that run the network: train, eval, render, mesh).
+void add_precision_option(CLI::App& cli, CommonOptions& options);
 
 // A CLI11 check: the value is a finite number (not nan or inf).
 CLI::Validator finite_number();

@@ -4,6 +4,7 @@
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
+#include "core/runtime.hpp"
 #include "data/dataset.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
@@ -47,6 +48,7 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
     spdlog::info("  parameters {:<44} {:>11}", p.module, with_commas(p.count));
   spdlog::info("render: {} samples/ray | progressive {} | chunk {} points", c.render.samples,
                c.render.progressive, c.render.chunk_points);
+  model::select_products(c.precision, c.fp32_products, runtime::select_device(c.device));
   spdlog::info("train: {} epochs x {} iters | lr {} (warm-up {} epochs, cosine to {}) | clip {} | "
                "LPIPS weight {}",
                c.train.epochs, c.train.iters_per_epoch, c.train.lr, c.train.warmup_epochs,

@@ -175,6 +175,11 @@ struct EvalConfig {
 struct Config {
   int64_t seed = 42;
   std::string device = "auto";  // auto | cpu | cuda
+  // Floating-point type of the network's matrix products (model/precision.hpp): fp32 (the
+  // paper's numbers), bf16, or auto (bf16 where the processor has native bf16 dot products).
+  std::string precision = "fp32";
+  // fp32 products on CPU: auto (oneDNN when LibTorch has it) | onednn | blas.
+  std::string fp32_products = "auto";
   int threads = 0;              // 0: one per core
   // Refuse work whose estimated peak memory (render, mesh) exceeds this; 0: 3/4 of physical memory.
   double max_memory_gb = 0;
@@ -309,6 +314,8 @@ template <class V> void visit_fields(V& v, EvalConfig& c) {
 template <class V> void visit_fields(V& v, Config& c) {
   v("seed", c.seed);
   v.choice("device", c.device, {"auto", "cpu", "cuda"});
+  v.choice("precision", c.precision, {"fp32", "bf16", "auto"});
+  v.choice("fp32_products", c.fp32_products, {"auto", "onednn", "blas"});
   v("threads", c.threads);
   v("max_memory_gb", c.max_memory_gb);
   v("data", c.data);

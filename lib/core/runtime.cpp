@@ -1,6 +1,9 @@
 #include "core/runtime.hpp"
 
 #include <dlfcn.h>
+#if defined(__x86_64__) || defined(__i386__)
+#include <cpuid.h>
+#endif
 #include <malloc.h>
 #include <spdlog/spdlog.h>
 #include <torch/cuda.h>
@@ -96,6 +99,27 @@ void log_blas() {
     spdlog::info("BLAS: {} ({}){}", b.name, b.library.empty() ? "not loaded" : b.library,
                  b.details.empty() ? "" : " [" + b.details + "]");
   }
+}
+
+CpuBf16 detect_cpu_bf16() {
+  CpuBf16 c;
+#if defined(__x86_64__) || defined(__i386__)
+  unsigned a = 0, b = 0, cx = 0, d = 0;
+  if (__get_cpuid_count(7, 0, &a, &b, &cx, &d)) {
+    const unsigned leaf1_max = a;  // subleaves of leaf 7
+    c.avx512 = (b >> 16 & 1) && (b >> 30 & 1) && (b >> 31 & 1);  // AVX512F, BW, VL
+    c.amx_bf16 = d >> 22 & 1;
+    if (leaf1_max >= 1 && __get_cpuid_count(7, 1, &a, &b, &cx, &d)) c.avx512_bf16 = a >> 5 & 1;
+  }
+#endif
+  return c;
+}
+
+std::string CpuBf16::describe() const {
+  if (avx512_bf16 && amx_bf16) return "AVX512-BF16 and AMX-BF16";
+  if (avx512_bf16) return "AVX512-BF16";
+  if (amx_bf16) return "AMX-BF16";
+  return avx512 ? "AVX-512 without BF16 instructions" : "no AVX-512";
 }
 
 torch::Device select_device(const std::string& requested) {

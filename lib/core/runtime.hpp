@@ -27,6 +27,20 @@ void log_blas();
 // Returns whether it was applied.
 bool keep_freed_memory();
 
+// What the processor offers for bf16 matrix products, from CPUID: AVX512-BF16 (dot products of
+// bf16 pairs into fp32) and AMX-BF16 (tile products) execute them natively; on a processor with
+// AVX-512 but neither, oneDNN emulates them with fp32 instructions (slower than fp32 itself);
+// without AVX-512 LibTorch's bf16 products fall back to its reference kernels (much slower).
+struct CpuBf16 {
+  bool avx512 = false;       // AVX512F + BW + VL (what oneDNN's bf16 paths need)
+  bool avx512_bf16 = false;  // AVX512_BF16
+  bool amx_bf16 = false;     // AMX-BF16
+  bool native() const { return avx512_bf16 || amx_bf16; }
+  // e.g. "AVX512-BF16 and AMX-BF16", "AVX-512 without BF16 instructions", "no AVX-512"
+  std::string describe() const;
+};
+CpuBf16 detect_cpu_bf16();
+
 // "auto" -> CUDA when the linked LibTorch has it and a GPU is present, else CPU.
 // "cuda" without CUDA is a th::Error.
 torch::Device select_device(const std::string& requested);

@@ -43,7 +43,9 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
     pipeline::JsonLine j;
     j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
         .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
-        .add("seconds_per_image", s.seconds_per_image);
+        .add("seconds_per_image", s.seconds_per_image)
+        .add("opaque_rays_1e-3", s.opaque_1e3)
+        .add("opaque_rays_1e-4", s.opaque_1e4);
     std::ofstream(dir / "summary.json") << j.str() << '\n';
   }
   std::ofstream(dir / "results.md") << markdown_table({s});
@@ -74,6 +76,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == "warn");
   model->to(device);
   model->eval();
+  model->set_products(model::select_products(config.precision, config.fp32_products, device));
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
   const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
   pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
@@ -90,12 +93,14 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   summary.setting = setting;
   summary.lpips_available = lpips != nullptr;
   pipeline::FrameReuse frames;
+  int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;
   Progress progress("eval " + setting, int64_t(n), "img");
   for (size_t i = 0; i < n; ++i) {
     const data::Sample s = loader.next();
     const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
     const auto r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
                                            config.eval.reuse_frames ? &frames : nullptr);
+    rays += r.rays, opaque_1e3 += r.opaque_1e3, opaque_1e4 += r.opaque_1e4;
     summary.per_image.push_back({s.human, s.frame, s.target_view, r.psnr, r.ssim, r.lpips, r.seconds,
                                  r.stats.points, r.stats.culled_points, r.stats.density_points});
     if (config.eval.save_images) {
@@ -119,6 +124,10 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
                  frames.prepared() + frames.reused());
 
   summary.images = int(summary.per_image.size());
+  summary.opaque_1e3 = rays ? double(opaque_1e3) / double(rays) : 0.0;
+  summary.opaque_1e4 = rays ? double(opaque_1e4) / double(rays) : 0.0;
+  spdlog::info("eval: {} rays, final transmittance below 1e-3 on {:.4f}%, below 1e-4 on {:.4f}%", rays,
+               100 * summary.opaque_1e3, 100 * summary.opaque_1e4);
   if (summary.images == 0) fail("setting '", setting, "' has no images to evaluate");
   auto mean = [&](auto field) {
     double sum = 0;

@@ -29,6 +29,8 @@ struct EvalSummary {
   double psnr = 0, ssim = 0, lpips = 0;  // means; lpips NaN when unavailable
   bool lpips_available = false;
   double seconds_per_image = 0;
+  // Of all rendered rays, the fractions whose final transmittance is below 1e-3 and 1e-4.
+  double opaque_1e3 = 0, opaque_1e4 = 0;
   std::vector<ImageScore> per_image;
 };
 

@@ -24,6 +24,7 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == "warn");
   model_->to(device);
   model_->eval();
+  model_->set_products(model::select_products(config.precision, config.fp32_products, device));
 }
 
 std::string Session::checkpoint_id() const {

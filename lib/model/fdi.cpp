@@ -187,35 +187,40 @@ torch::Tensor FDIImpl::attend(const torch::Tensor& qr, const torch::Tensor& kv, 
   return ViewAttention::apply(qr, kv, d);
 }
 
-torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a) {
+torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a, const Products& P) {
+  // Products in the compute type; the attention's scores and softmax in fp32.
+  auto layer = [&](const torch::nn::Linear& l, const torch::Tensor& x) { return P.linear(x, l->weight, l->bias); };
+  auto fp32 = [&](const torch::nn::Linear& l, const torch::Tensor& x) { return Products::fp32(layer(l, x)); };
   torch::Tensor o;
   if (config.appearance && config.human) {
-    const auto att = attention(key1(s), key0(a));
-    o = value1(s) + torch::bmm(att, value0(a));
+    const auto att = attention(fp32(key1, s), fp32(key0, a));
+    o = fp32(value1, s) + torch::bmm(att, fp32(value0, a));
   } else if (config.appearance) {
-    const auto k = key0(a);
-    o = value0(a);
+    const auto k = fp32(key0, a);
+    o = fp32(value0, a);
     o = o + torch::bmm(attention(k, k), o);
   } else {
     o = value1(s);
   }
-  return torch::relu(fc_2(torch::relu(fc_1(o))));
+  return torch::relu(layer(fc_2, torch::relu(layer(fc_1, o))));
 }
 
-torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a) {
+torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                                      const Products& P) {
   torch::Tensor pre;
   if (config.appearance && config.human) {
-    const auto kv = F::linear(a, f.w0, f.b0);  // (N, V, 128 + 256)
-    const auto qr = F::linear(s, f.w1, f.b1);
+    // (N, V, 128 + 256) each; the attention kernel takes fp32
+    const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
+    const auto qr = Products::fp32(P.linear(s, f.w1, f.b1));
     pre = attend(qr, kv, 128);
   } else if (config.appearance) {
-    const auto kv = F::linear(a, f.w0, f.b0);
+    const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
     const auto k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256);
     pre = torch::baddbmm(u + fc_1->bias, attention(k, k), u);
   } else {
-    pre = F::linear(s, f.w1, f.b1);
+    pre = P.linear(s, f.w1, f.b1);
   }
-  return fc_2(pre.relu_()).relu_();
+  return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();
 }
 
 }  // namespace th::model

@@ -8,6 +8,7 @@
 #include <torch/torch.h>
 
 #include "core/config.hpp"
+#include "model/precision.hpp"
 
 namespace th::model {
 
@@ -23,11 +24,12 @@ class FDIImpl : public torch::nn::Module {
   FDIImpl(const FDIConfig& config, int64_t pixel_channels);
 
   // The reference computation. s, a: (N, V, 256) (undefined when the branch is off)
-  // -> e: (N, V, 256).
-  torch::Tensor forward(const torch::Tensor& s, const torch::Tensor& a);
+  // -> e: (N, V, 256), in the products' compute type (model/precision.hpp).
+  torch::Tensor forward(const torch::Tensor& s, const torch::Tensor& a, const Products& products = {});
 
   // The same from folded weights (fewer matrix products; model/shortcuts.hpp folds them).
-  torch::Tensor forward_folded(const FDIFolded& folded, const torch::Tensor& s, const torch::Tensor& a);
+  torch::Tensor forward_folded(const FDIFolded& folded, const torch::Tensor& s, const torch::Tensor& a,
+                               const Products& products = {});
 
   // softmax over the key views j of q_v . k_j / sqrt(d): q (N, V, d), k (N, V, d) -> (N, V, V)
   // indexed [n, v (query), j (key)].

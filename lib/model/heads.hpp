@@ -5,6 +5,8 @@
 
 #include <torch/torch.h>
 
+#include "model/precision.hpp"
+
 namespace th::model {
 
 // Folded colour weights (exact identities): view_fc's feature part is composed with
@@ -20,17 +22,19 @@ class HeadsImpl : public torch::nn::Module {
   // appearance: the rgb_res_* residuals from p_v exist (false for the "w/o a" ablation).
   HeadsImpl(bool appearance, int64_t pixel_channels);
 
-  // e: (N, V, 256) -> raw density (N).
-  torch::Tensor density(const torch::Tensor& e);
+  // e: (N, V, 256) fp32 or bf16 -> raw density (N) fp32. fc_3 in the products' compute type,
+  // alpha_fc in fp32 (model/precision.hpp).
+  torch::Tensor density(const torch::Tensor& e, const Products& products = {});
 
   // The reference colour head. e: (N, V, 256); p: (N, V, Cpix) or undefined; dir_code: (N, 27)
-  // gamma(d) -> raw rgb (N, 3).
-  torch::Tensor color(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code);
+  // gamma(d) -> raw rgb (N, 3) fp32. The products on e in the compute type.
+  torch::Tensor color(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code,
+                      const Products& products = {});
 
   // The same from folded weights (model/shortcuts.hpp folds them). readout: (N, V, 256) = the
   // folded readout of p_v (undefined w/o appearance).
-  torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e,
-                             const torch::Tensor& readout, const torch::Tensor& dir_code);
+  torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e, const torch::Tensor& readout,
+                             const torch::Tensor& dir_code, const Products& products = {});
 
   torch::nn::Linear fc_3{nullptr}, alpha_fc{nullptr};
   torch::nn::Linear feature_fc{nullptr}, view_fc{nullptr}, fc_4{nullptr}, rgb_fc{nullptr};

@@ -25,7 +25,7 @@ void TokenFieldsImpl::prepare(const FrameInputs& in, const PaintedBody& body, Hu
   }
 }
 
-torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Tensor& xs) {
+torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) {
   if (!config_.exact_shortcuts) {
     const auto h = dparf.features(stage.frames, stage.tokens, xs);  // (N, V, 255)
     return torch::relu(fc_0(h));
@@ -36,7 +36,7 @@ torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Ten
   auto s = weighted_gather(stage.table, {q.index, q.weight}, stage.table_grad_sink).view({n, -1, 256});
   if (q.coords.defined()) {
     const auto C = fc_0->weight.size(1) - q.coords.size(1);
-    s.add_(torch::mm(q.coords, fc_0->weight.narrow(1, C, q.coords.size(1)).t()).unsqueeze(1));
+    s.add_(products.linear_fp32(q.coords, fc_0->weight.narrow(1, C, q.coords.size(1))).unsqueeze(1));
   }
   return s.relu_();
 }

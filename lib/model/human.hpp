@@ -12,6 +12,7 @@
 #include "model/dparf.hpp"
 #include "model/frame_cache.hpp"
 #include "model/inputs.hpp"
+#include "model/precision.hpp"
 #include "model/transhe.hpp"
 
 namespace th::model {
@@ -20,8 +21,9 @@ class HumanRepresentation : public torch::nn::Module {
  public:
   // The per-frame part: the painted body -> the human stage of the frame state.
   virtual void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) = 0;
-  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256).
-  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) = 0;
+  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32; its
+  // products as `products` says (model/precision.hpp).
+  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) = 0;
 };
 
 // TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*).
@@ -30,7 +32,7 @@ class TokenFieldsImpl : public HumanRepresentation {
   explicit TokenFieldsImpl(const ModelConfig& config);
 
   void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
 
   TransHE vit{nullptr};
   torch::nn::Linear fc_0{nullptr};

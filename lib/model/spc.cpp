@@ -42,7 +42,7 @@ void SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBody& bod
   stage.extent = (dims - 1).to(lo.dtype()) * voxel;
 }
 
-torch::Tensor SPCTrilinearImpl::forward(const HumanStage& stage, const torch::Tensor& xs) {
+torch::Tensor SPCTrilinearImpl::forward(const HumanStage& stage, const torch::Tensor& xs, const Products&) {
   const auto& grid = stage.grid;
   const auto V = grid.size(0), n = xs.size(0);
   // (x, y, z) -> [-1, 1] over the voxel centres (align_corners); outside the grid reads 0.

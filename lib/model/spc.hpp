@@ -14,7 +14,7 @@ class SPCTrilinearImpl : public HumanRepresentation {
   explicit SPCTrilinearImpl(const ModelConfig& config);
 
   void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
 
   torch::nn::Linear embed{nullptr}, fc_0{nullptr};
   torch::nn::Sequential conv{nullptr};

@@ -64,7 +64,11 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   EncodedViews enc;
   {
     ScopedTimer timer(profile_, "encoder");
-    enc = encoder->forward(in.ref_images);
+    {
+      FrameAutocast autocast(products_, opts.device());
+      enc = encoder->forward(in.ref_images);
+    }
+    for (auto& level : enc.levels) level = Products::fp32(level);
   }
   cache.pixels.geometry = enc.geometry;
   if (config_.exact_shortcuts) cache.folded = fold_weights(*fdi, *heads);
@@ -81,7 +85,13 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
     }
     ScopedTimer timer(profile_, "transhe");
     body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);
-    human->prepare(in, body, cache.human);
+    {
+      FrameAutocast autocast(products_, opts.device());
+      human->prepare(in, body, cache.human);
+    }
+    auto& h = cache.human;
+    for (auto* t : {&h.tokens, &h.table, &h.grid, &h.frames.origins, &h.frames.rotations})
+      if (t->defined()) *t = Products::fp32(*t);
   }
 
   // What per-point sampling reads of the encoder output (the appearance branch of FDI and the
@@ -149,7 +159,7 @@ TransHumanImpl::PointFeatures TransHumanImpl::point_features(const FrameCache& c
   if (human) {
     ScopedTimer timer(profile_, "dparf");
     const auto xs = torch::mm(pts - geo.Th, geo.Rh);
-    f.s = human->forward(cache.human, xs);
+    f.s = human->forward(cache.human, xs, products_);
   }
   {
     ScopedTimer timer(profile_, "sampling");
@@ -166,7 +176,8 @@ TransHumanImpl::PointFeatures TransHumanImpl::point_features(const FrameCache& c
 TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
   const PointFeatures f = point_features(cache, pts);
   ScopedTimer timer(profile_, "fdi");
-  auto e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, f.s, f.a) : fdi->forward(f.s, f.a);
+  auto e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, f.s, f.a, products_)
+                                   : fdi->forward(f.s, f.a, products_);
   return {std::move(e), f.uv};
 }
 
@@ -177,8 +188,8 @@ torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, con
                                   : pixel_features_at(cache.pixels, t.uv);
   ScopedTimer timer(profile_, "heads");
   const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
-  if (config_.exact_shortcuts) return heads->color_folded(cache.folded.heads, t.e, pix, code);
-  return heads->color(t.e, pix, code);
+  if (config_.exact_shortcuts) return heads->color_folded(cache.folded.heads, t.e, pix, code, products_);
+  return heads->color(t.e, pix, code, products_);
 }
 
 torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tensor& pts,
@@ -187,7 +198,7 @@ torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tens
   torch::Tensor sigma;
   {
     ScopedTimer timer(profile_, "heads");
-    sigma = heads->density(t.e);
+    sigma = heads->density(t.e, products_);
   }
   const auto rgb = color(cache, t, dirs);
   return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
@@ -196,7 +207,7 @@ torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tens
 torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tensor& pts) {
   const auto t = trunk(cache, pts);
   ScopedTimer timer(profile_, "heads");
-  return heads->density(t.e);
+  return heads->density(t.e, products_);
 }
 
 torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
@@ -205,7 +216,7 @@ torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, con
   torch::Tensor sigma;
   {
     ScopedTimer timer(profile_, "heads");
-    sigma = heads->density(t.e);
+    sigma = heads->density(t.e, products_);
   }
   const auto idx = (sigma > 0).nonzero().flatten();
   // Every point has density (a translucent model): colour for all rows, without copying the

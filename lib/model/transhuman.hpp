@@ -16,6 +16,7 @@
 #include "model/heads.hpp"
 #include "model/human.hpp"
 #include "model/inputs.hpp"
+#include "model/precision.hpp"
 #include "render/progressive.hpp"
 #include "render/volume.hpp"
 
@@ -43,6 +44,10 @@ class TransHumanImpl : public torch::nn::Module {
 
   // Per-stage wall times are added to `profile` when set (benchmarks).
   void set_profile(render::Profile* profile) { profile_ = profile; }
+  // The precision of the products (model/precision.hpp); fp32 through BLAS until set. The
+  // parameters and the per-frame state stay fp32 either way.
+  void set_products(const Products& products) { products_ = products; }
+  const Products& products() const { return products_; }
   const ModelConfig& config() const { return config_; }
 
   Encoder encoder{nullptr};
@@ -72,6 +77,7 @@ class TransHumanImpl : public torch::nn::Module {
 
   ModelConfig config_;
   double cull_distance_;
+  Products products_;
   render::Profile* profile_ = nullptr;
 };
 TORCH_MODULE(TransHuman);

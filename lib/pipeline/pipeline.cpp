@@ -76,6 +76,9 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   r.stats = result.stats;
   const auto rgb = result.rgb.to(torch::kCPU, torch::kFloat32);
   r.acc_max = result.acc.numel() ? result.acc.max().item<double>() : 0.0;
+  r.rays = result.acc.numel();
+  r.opaque_1e3 = (1 - result.acc.to(torch::kDouble) < 1e-3).sum().item<int64_t>();
+  r.opaque_1e4 = (1 - result.acc.to(torch::kDouble) < 1e-4).sum().item<int64_t>();
   r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (SPEC 6)
   const int64_t H = sample.target_image.size(0), W = sample.target_image.size(1);
   r.pred = scatter_image(rgb, sample.ray_pixel, H, W);

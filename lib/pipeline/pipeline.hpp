@@ -70,6 +70,9 @@ class FrameReuse {
 struct ViewResult {
   double psnr = 0, ssim = 0, lpips = std::numeric_limits<double>::quiet_NaN();
   double acc_max = 0;       // largest accumulated opacity (near 0 everywhere: a collapsed model)
+  // Rays whose final transmittance 1 - acc is below 1e-3 and 1e-4 (opaque: early ray
+  // termination pays only on those), of `rays` rendered.
+  int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;
   double seconds = 0;       // render time
   torch::Tensor pred, gt;   // (H, W, 3) float32 CPU, black outside the valid rays
   render::RenderStats stats;

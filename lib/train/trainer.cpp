@@ -149,6 +149,7 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   model_ = model::TransHuman(config.model, config.render.cull_distance);
   // The constructor loads model.encoder.pretrained (and logs either way).
   model_->to(device);
+  model_->set_products(model::select_products(config.precision, config.fp32_products, device));
   optim_ = std::make_unique<torch::optim::Adam>(
       model_->parameters(), torch::optim::AdamOptions(tc_.lr).betas({tc_.beta1, tc_.beta2}).eps(tc_.eps));
   if (tc_.lpips_weight > 0) lpips_ = metrics::try_load_lpips(tc_.lpips_weights, device, "the perceptual loss");
@@ -243,7 +244,8 @@ void Run::log_step(const StepStats& stats, double lr, int epoch, const data::Pre
       .add("psnr", w.psnr / w.steps).add("time_per_step", w.seconds / w.steps)
       .add("rays_per_second", w.rays / w.seconds)
       .add("loader_wait", loader.wait_seconds())
-      .add("world_size", procs_).add("global_batch", world_);
+      .add("world_size", procs_).add("global_batch", world_)
+      .add("elapsed_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count());
   if (comm_) line.add("allreduce_seconds", w.allreduce / w.steps);
   metrics_log_->write(line);
   char note[96];

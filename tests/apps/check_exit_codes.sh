@@ -30,6 +30,10 @@ expect 2 "transhuman-synth: error:" "$apps/transhuman-synth"
 expect 2 "model.dparf.nkk" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1
 expect 2 "does not exist" "$apps/transhuman-train" --dry-run --config /nonexistent/config.yaml
 expect 2 "--checkpoint is required" "$apps/transhuman-eval" "${tiny[@]}"
+# Precision: a bad value is refused by name, on the command line and in the config.
+expect 2 "--precision: fp16 not in {fp32,bf16,auto}" "$apps/transhuman-render" --precision fp16
+expect 2 "config key 'precision': 'half' is not one of" "$apps/transhuman-train" --dry-run "${tiny[@]}" precision=half
+expect 2 "config key 'fp32_products': 'mkl' is not one of" "$apps/transhuman-eval" --dry-run "${tiny[@]}" fp32_products=mkl
 # Run folders are never silently overwritten (training and evaluation).
 scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT

@@ -69,6 +69,7 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   th::model::TransHuman model(config.model, config.render.cull_distance);
   th::pipeline::load_weights(*model, tiny_checkpoint());
   model->eval();
+  model->set_products(th::model::resolve_products(config.precision, config.fp32_products, torch::kCPU));
   const auto smpl = th::data::load_body_model(config.data);
   th::pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
   const auto inputs = th::pipeline::frame_inputs(s, smpl->v_template,

@@ -16,48 +16,13 @@
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/pipeline.hpp"
 #include "support/test_env.hpp"
+#include "trained_tiny.hpp"
 
 namespace fs = std::filesystem;
 
-namespace {
-
-th::Config surface_config(std::vector<std::string> overrides = {}) {
-  const auto root = th::test::tiny_dataset();
-  overrides.insert(overrides.begin(),
-                   {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
-                    "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
-                    "eval.setting=identity", "eval.save_images=false"});
-  return th::config::load<th::Config>("tests/configs/tiny_surface.yaml", overrides);
-}
-
-fs::path trained_checkpoint() {
-  const auto path = th::test::test_tmp_root() / "trained_tiny" / "checkpoints" / "latest.pt";
-  REQUIRE(fs::exists(path));  // made by the CTest fixture trained_tiny_checkpoint
-  return path;
-}
-
-struct Frames {
-  th::Config config;
-  th::model::TransHuman model{nullptr};
-  std::shared_ptr<const th::data::Dataset> dataset;
-  torch::Tensor canonical;
-  std::unique_ptr<th::pipeline::Tokens> tokens;
-
-  explicit Frames(th::Config c) : config(std::move(c)) {
-    model = th::model::TransHuman(config.model, config.render.cull_distance);
-    th::pipeline::load_weights(*model, trained_checkpoint());
-    model->eval();
-    const auto smpl = th::data::load_body_model(config.data);
-    dataset = std::make_shared<const th::data::Dataset>(config.data, "identity", th::data::Dataset::Mode::Test, smpl);
-    canonical = smpl->v_template;
-    tokens = std::make_unique<th::pipeline::Tokens>(config.model.grouping, smpl->v_template);
-  }
-  th::model::FrameInputs inputs(const th::data::Sample& s) {
-    return th::pipeline::frame_inputs(s, canonical, tokens->labels(s.body), torch::kCPU);
-  }
-};
-
-}  // namespace
+using th::test::Frames;
+using th::test::surface_config;
+using th::test::trained_checkpoint;
 
 TEST_CASE("on a trained network, early ray termination stays within its bound of the exact render on every ray",
           "[inference][termination]") {

@@ -1,0 +1,140 @@
+#include "model/precision.hpp"
+
+#include <ATen/Context.h>
+#include <torch/csrc/autograd/custom_function.h>
+#include <spdlog/spdlog.h>
+#include <torch/torch.h>
+
+#include "core/error.hpp"
+#include "core/runtime.hpp"
+#include "core/torch_compat.hpp"
+
+namespace th::model {
+namespace {
+
+namespace F = torch::nn::functional;
+
+// x2 (M, in) fp32 -> (M, out) through oneDNN: dense -> oneDNN layout, product, back to dense.
+torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w, const torch::Tensor& b) {
+  const c10::optional<torch::Tensor> bias = b.defined() ? c10::optional<torch::Tensor>(b) : c10::nullopt;
+  return at::mkldnn_linear(x2.contiguous().to_mkldnn(), w.contiguous(), bias).to_dense();
+}
+
+// The oneDNN product with its backward (oneDNN's own derivative wants oneDNN-layout gradients):
+// dx = g w (oneDNN), dw = g^T x and db = sum g (BLAS; reductions over the rows). No bias: an
+// empty tensor (a custom function's inputs must be defined tensors).
+struct OneDnnLinear : torch::autograd::Function<OneDnnLinear> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x2,
+                               const torch::Tensor& w, const torch::Tensor& b) {
+    ctx->save_for_backward({x2, w});
+    const bool bias = b.numel() > 0;
+    ctx->saved_data["bias"] = bias;
+    return onednn_product(x2, w, bias ? b : torch::Tensor());
+  }
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grads) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &x2 = saved[0], &w = saved[1];
+    const auto g = grads[0].contiguous();
+    torch::Tensor gx, gw, gb;
+    if (ctx->needs_input_grad(0)) gx = onednn_product(g, w.t().contiguous(), {});
+    if (ctx->needs_input_grad(1)) gw = torch::mm(g.t(), x2);
+    if (ctx->saved_data["bias"].toBool() && ctx->needs_input_grad(2)) gb = g.sum(0);
+    return {gx, gw, gb};
+  }
+};
+
+}  // namespace
+
+torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b) const {
+  if (bf16()) {
+    const auto t = torch::kBFloat16;
+    return F::linear(x.to(t), w.to(t), b.defined() ? b.to(t) : b);
+  }
+  return linear_fp32(x, w, b);
+}
+
+torch::Tensor Products::linear_fp32(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b) const {
+  const auto xf = fp32(x);
+  const int64_t in = xf.size(-1), rows = in > 0 ? xf.numel() / in : 0;
+  if (!onednn || !xf.device().is_cpu() || rows < kOneDnnMinRows || xf.scalar_type() != torch::kFloat)
+    return F::linear(xf, w, b);
+  auto sizes = xf.sizes().vec();
+  sizes.back() = w.size(0);
+  const auto x2 = xf.reshape({rows, in});
+  const bool grad = torch::GradMode::is_enabled() && (x2.requires_grad() || w.requires_grad() ||
+                                                      (b.defined() && b.requires_grad()));
+  return (grad ? OneDnnLinear::apply(x2, w, b.defined() ? b : torch::empty({0}, w.options()))
+               : onednn_product(x2, w, b))
+      .view(sizes);
+}
+
+torch::Tensor Products::fp32(const torch::Tensor& x) {
+  const auto t = x.scalar_type();
+  return t == torch::kBFloat16 || t == torch::kHalf ? x.to(torch::kFloat) : x;
+}
+
+std::string Products::describe() const {
+  if (bf16()) return "bf16 (bf16 products, fp32 elsewhere)";
+  return onednn ? "fp32 (oneDNN products)" : "fp32 (BLAS products)";
+}
+
+Products resolve_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device,
+                          std::string* why, std::string* warning) {
+  if (precision != "fp32" && precision != "bf16" && precision != "auto")
+    fail("precision '", precision, "': expected fp32, bf16 or auto");
+  if (fp32_products != "auto" && fp32_products != "onednn" && fp32_products != "blas")
+    fail("fp32_products '", fp32_products, "': expected auto, onednn or blas");
+  const bool cpu = device.is_cpu();
+  if (fp32_products == "onednn" && cpu && !at::hasMKLDNN())
+    fail("fp32_products 'onednn': the linked LibTorch is built without oneDNN (use auto or blas)");
+  Products p;
+  p.onednn = cpu && fp32_products != "blas" && at::hasMKLDNN();
+  const auto bf16 = runtime::detect_cpu_bf16();
+  std::string reason;
+  if (precision == "fp32") {
+    reason = "precision: fp32";
+  } else if (precision == "bf16") {
+    p.precision = Precision::bf16;
+    reason = "precision: bf16";
+    if (cpu && !bf16.native() && warning)
+      *warning = "precision: bf16 on a processor without native bf16 dot products (" + bf16.describe() +
+                 "): the products are emulated and run slower than fp32";
+  } else if (!cpu) {
+    reason = "precision: auto on " + device.str() + " keeps fp32 (set precision: bf16 for autocast)";
+  } else if (bf16.native()) {
+    p.precision = Precision::bf16;
+    reason = "precision: auto -> bf16: the processor has " + bf16.describe();
+  } else {
+    reason = "precision: auto -> fp32: the processor has " + bf16.describe() + ", no native bf16 dot products";
+  }
+  if (why) *why = reason + " | " + p.describe();
+  return p;
+}
+
+Products select_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device) {
+  std::string why, warning;
+  const auto p = resolve_products(precision, fp32_products, device, &why, &warning);
+  spdlog::info("{}", why);
+  if (!warning.empty()) spdlog::warn("{}", warning);
+  return p;
+}
+
+FrameAutocast::FrameAutocast(const Products& products, const torch::Device& device)
+    : active_(products.bf16()), cuda_(device.is_cuda()) {
+  if (!active_) return;
+  was_enabled_ = compat::autocast_enabled(cuda_);
+  previous_dtype_ = compat::autocast_dtype(cuda_);
+  compat::set_autocast_enabled(cuda_, true);
+  compat::set_autocast_dtype(cuda_, torch::kBFloat16);
+  at::autocast::increment_nesting();
+}
+
+FrameAutocast::~FrameAutocast() {
+  if (!active_) return;
+  if (at::autocast::decrement_nesting() == 0) at::autocast::clear_cache();
+  compat::set_autocast_enabled(cuda_, was_enabled_);
+  compat::set_autocast_dtype(cuda_, previous_dtype_);
+}
+
+}  // namespace th::model

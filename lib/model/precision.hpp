@@ -1,0 +1,83 @@
+#pragma once
+// Mixed precision: which operation of the network runs in which floating-point type. Decided
+// here and nowhere else; the stages call Products::linear for their products and
+// FrameAutocast around the per-frame modules, and never cast on their own.
+//
+// | work                                                        | fp32            | bf16                        |
+// |-------------------------------------------------------------|-----------------|-----------------------------|
+// | per-point products: FDI's key/value projections and fc_2,   | fp32: oneDNN or | bf16 operands, fp32         |
+// |   the density head's fc_3, the colour head's feature product|   BLAS (below)  |   accumulation (oneDNN)     |
+// | per-frame modules: ResNet encoder, TransHE (convolutions,   | fp32            | autocast to bf16; outputs   |
+// |   linear layers, attention products)                        |                 |   cast back to fp32         |
+// | positional encodings, DPaRF's distances, nearest fields and | fp32            | fp32                        |
+// |   weights, gathers of tables, the view attention's softmax, |                 |                             |
+// |   the last layers of both heads, compositing, losses,       |                 |                             |
+// |   metrics, optimiser state and master weights, checkpoints  |                 |                             |
+//
+// A bf16 product's output stays bf16 only where another product or a ReLU follows; the
+// project's own kernels (the view attention, weighted gathers) take fp32, so their inputs are
+// converted at the boundary (measured: conversion costs less than bf16 loads in those kernels).
+// Weights stay fp32 parameters and are cast per use, so gradients reach fp32 master weights.
+//
+// fp32 products: oneDNN (a reorder in, the product, a reorder out) runs 2-3x faster than
+// OpenBLAS on the per-point shapes at 2 threads and sums in another order (results differ by
+// float rounding, ~1e-7 relative per product); it is taken for products of at least
+// kOneDnnMinRows rows when LibTorch is built with it (`fp32_products: auto`).
+
+#include <torch/types.h>
+
+#include <string>
+
+namespace th::model {
+
+enum class Precision { fp32, bf16 };
+
+// Products of fewer rows than this stay on BLAS (the reorders cost more than they save).
+constexpr int64_t kOneDnnMinRows = 256;
+
+struct Products {
+  Precision precision = Precision::fp32;
+  bool onednn = false;  // fp32 products through oneDNN (CPU only)
+
+  bool bf16() const { return precision == Precision::bf16; }
+  // y = x w^T + b: x (..., in) fp32 or bf16, w (out, in) and b (out) fp32 (b may be undefined)
+  // -> (..., out) in the compute type (bf16 under bf16). Differentiable in x, w and b. A float64
+  // model (gradient checks) computes in float64 under fp32 and never through oneDNN.
+  torch::Tensor linear(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b = {}) const;
+  // The same in fp32 whatever the precision (the heads' last layers, the small per-point
+  // products), through oneDNN when `onednn`: the per-point loop then never wakes BLAS's own
+  // thread pool, whose waiting threads would compete with oneDNN's for the cores.
+  torch::Tensor linear_fp32(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b = {}) const;
+  // x in fp32 when it is bf16 or fp16; fp32 and float64 tensors (gradient checks) unchanged.
+  static torch::Tensor fp32(const torch::Tensor& x);
+  // "fp32 (oneDNN products)", "bf16" ...
+  std::string describe() const;
+};
+
+// The products for the config's `precision` (fp32 | bf16 | auto) and `fp32_products`
+// (auto | onednn | blas) on `device`. auto takes bf16 where the processor executes bf16 dot
+// products natively (AVX512-BF16 or AMX, runtime::detect_cpu_bf16) or on a CUDA device with
+// bf16 support, fp32 elsewhere. `why` (optional) receives one line saying which and why; an
+// explicit bf16 on a processor without those instructions runs emulated and `warning` says so.
+// A bad value is a th::Error naming it.
+Products resolve_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device,
+                          std::string* why = nullptr, std::string* warning = nullptr);
+
+// resolve_products for the config's keys, with its line logged (and its warning, if any).
+Products select_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device);
+
+// Autocast to bf16 on `device` while alive, when `products` asks for bf16 (the per-frame
+// modules); nothing otherwise. Restores the previous autocast state.
+class FrameAutocast {
+ public:
+  FrameAutocast(const Products& products, const torch::Device& device);
+  ~FrameAutocast();
+  FrameAutocast(const FrameAutocast&) = delete;
+  FrameAutocast& operator=(const FrameAutocast&) = delete;
+
+ private:
+  bool active_ = false, cuda_ = false, was_enabled_ = false;
+  c10::ScalarType previous_dtype_ = c10::ScalarType::Float;
+};
+
+}  // namespace th::model
