@@ -94,8 +94,10 @@ for t in "${targets[@]}"; do
   log="$build/fuzz-$t.log"
   echo "fuzz: running ${t}_fuzz for ${seconds}s on $(ls "$corpus" | wc -l) corpus files (log: $log)"
   set +e
+  # The slow unwinder (fast_unwind_on_malloc=0) costs executions per second but gives leak
+  # reports whole stacks through LibTorch, which the narrow suppression in fuzz/lsan.supp needs.
   ASAN_OPTIONS="detect_leaks=1:allocator_may_return_null=1" \
-    LSAN_OPTIONS="suppressions=$root/fuzz/lsan.supp:print_suppressions=0" \
+    LSAN_OPTIONS="suppressions=$root/fuzz/lsan.supp:print_suppressions=0:fast_unwind_on_malloc=0" \
     "$build/fuzz/${t}_fuzz" "$corpus" -max_total_time="$seconds" -max_len=16384 -timeout=20 \
     -rss_limit_mb=2048 -malloc_limit_mb=2048 -artifact_prefix="$crashes/$t-" \
     -print_final_stats=1 "${extra[@]}" >"$log" 2>&1

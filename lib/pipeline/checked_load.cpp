@@ -140,7 +140,8 @@ void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset
     fail(what, " (shape ", sizes, ", strides ", strides, ", offset ", offset, ") ", why,
          ": a truncated or corrupt record");
   };
-  if (sizes.size() != strides.size()) bad_view("has as many strides as sizes");
+  if (sizes.size() != strides.size())
+    bad_view("has " + std::to_string(strides.size()) + " stride(s) for " + std::to_string(sizes.size()) + " size(s)");
   if (offset < 0) bad_view("starts before its storage");
   constexpr int64_t kMax = std::numeric_limits<int64_t>::max();
   int64_t numel = 1, last = offset;

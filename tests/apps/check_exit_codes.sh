@@ -21,14 +21,14 @@ expect() {
   fi
 }
 tiny=(data.root="$data" data.split_file="$data/split.yaml" model.grouping.cache_dir="$data/../kmeans_cache")
-expect 2 "transhuman-train: error:" "$apps/transhuman-train" --bogus-flag
-expect 2 "--max-steps" "$apps/transhuman-train" --max-steps
-expect 2 "transhuman-eval: error:" "$apps/transhuman-eval" --limit notanumber
-expect 2 "--threads" "$apps/transhuman-render" --threads 100000
-expect 2 "transhuman-mesh: error:" "$apps/transhuman-mesh" --no-such-option
-expect 2 "transhuman-synth: error:" "$apps/transhuman-synth"
-expect 2 "model.dparf.nkk" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1
-expect 2 "does not exist" "$apps/transhuman-train" --dry-run --config /nonexistent/config.yaml
+expect 2 "transhuman-train: error: The following argument was not expected: --bogus-flag" "$apps/transhuman-train" --bogus-flag
+expect 2 "--max-steps: 1 required" "$apps/transhuman-train" --max-steps
+expect 2 "transhuman-eval: error: --limit: 'notanumber' is not a number" "$apps/transhuman-eval" --limit notanumber
+expect 2 "--threads: Value 100000 not in range 0 to 4096" "$apps/transhuman-render" --threads 100000
+expect 2 "transhuman-mesh: error: The following argument was not expected: --no-such-option" "$apps/transhuman-mesh" --no-such-option
+expect 2 "transhuman-synth: error: --out is required" "$apps/transhuman-synth"
+expect 2 "unknown config key 'model.dparf.nkk' (did you mean 'model.dparf.nk'?)" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1
+expect 2 "config file '/nonexistent/config.yaml' does not exist" "$apps/transhuman-train" --dry-run --config /nonexistent/config.yaml
 expect 2 "--checkpoint is required" "$apps/transhuman-eval" "${tiny[@]}"
 # Precision: a bad value is refused by name, on the command line and in the config.
 expect 2 "--precision: fp16 not in {fp32,bf16,auto}" "$apps/transhuman-render" --precision fp16
@@ -39,7 +39,7 @@ scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT
 mkdir -p "$scratch/used" && echo old > "$scratch/used/results.md"
 expect 2 "already holds 1 entry (results.md)" "$apps/transhuman-eval" --checkpoint x.pt --out "$scratch/used" "${tiny[@]}"
-expect 2 "already holds" "$apps/transhuman-train" --dry-run --out "$scratch/used" "${tiny[@]}"
+expect 2 "already holds 1 entry (results.md)" "$apps/transhuman-train" --dry-run --out "$scratch/used" "${tiny[@]}"
 "$apps/transhuman-train" --dry-run --out "$scratch/run" "${tiny[@]}" >/dev/null 2>&1
 expect 2 "model.dparf.nk (run: 7, now: 1)" "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" model.dparf.nk=1
 if "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" train.lr=1e-4 >/dev/null 2>&1; then
@@ -54,18 +54,18 @@ else
 fi
 # Values are checked, never replaced by a default.
 expect 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
-expect 2 "--width" "$apps/transhuman-render" --width -10
-expect 2 "--frame" "$apps/transhuman-mesh" --frame -1
-expect 2 "must be >= 0, not nan" "$apps/transhuman-mesh" --threshold nan
-expect 2 "--limit" "$apps/transhuman-eval" --limit -5
-expect 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
+expect 2 "--width: must be >= 1, not -10" "$apps/transhuman-render" --width -10
+expect 2 "--frame: must be >= 0, not -1" "$apps/transhuman-mesh" --frame -1
+expect 2 "--threshold: must be >= 0, not nan" "$apps/transhuman-mesh" --threshold nan
+expect 2 "--limit: must be >= 0, not -5" "$apps/transhuman-eval" --limit -5
+expect 2 "--max-steps: must be >= 0, not -1" "$apps/transhuman-train" --max-steps -1
 : > "$scratch/empty.yaml"
-expect 2 "is empty" "$apps/transhuman-train" --dry-run --config "$scratch/empty.yaml"
+expect 2 "config file '$scratch/empty.yaml' is empty" "$apps/transhuman-train" --dry-run --config "$scratch/empty.yaml"
 printf 'parent: %s\ntrain:\n  lr:\n' "$PWD/configs/default.yaml" > "$scratch/null.yaml"
 expect 2 "'train.lr' has no value" "$apps/transhuman-train" --dry-run --config "$scratch/null.yaml"
 printf 'parent: %s\nseed: 1\nseed: 2\n' "$PWD/configs/default.yaml" > "$scratch/twice.yaml"
 expect 2 "'seed' appears twice" "$apps/transhuman-train" --dry-run --config "$scratch/twice.yaml"
-expect 2 "is a folder" "$apps/transhuman-train" --dry-run --config "$scratch"
+expect 2 "config file '$scratch' is a folder, not a file" "$apps/transhuman-train" --dry-run --config "$scratch"
 if "$apps/transhuman-train" --help >/dev/null; then echo "ok: --help exits 0"; else echo "FAIL: --help"; failures=$((failures + 1)); fi
 echo "$failures failed"
 exit $((failures > 0))

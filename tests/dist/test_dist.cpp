@@ -1,9 +1,9 @@
 #include <catch2/catch.hpp>
-
 #include <torch/torch.h>
 
 #include <chrono>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <set>
 
@@ -141,14 +141,17 @@ TEST_CASE("the workers of --nproc N run this program without it, in the run dire
   const int argc = int(std::size(argv));
   const auto args = th::dist::worker_args(argc, argv, "runs/train");
   REQUIRE(args.size() == 8);
-  CHECK(args[0] == th::dist::self_executable());  // this test binary here
+  // This test binary, as the kernel names it (not the argv[0] given above).
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
+  CHECK(th::dist::self_executable() == self);
+  CHECK(args[0] == self);
   CHECK(std::vector<std::string>(args.begin() + 1, args.end()) ==
         std::vector<std::string>{"--out", "runs/train", "--config", "c.yaml", "train.epochs=3",
                                  "--max-steps", "5"});
   // With --out given by the user (kept where it is), nothing is added.
   const char* with_out[] = {"transhuman-train", "--out", "mine", "--nproc", "2"};
   CHECK(th::dist::worker_args(3 + 2, with_out, "") ==
-        std::vector<std::string>{th::dist::self_executable(), "--out", "mine"});
+        std::vector<std::string>{self, "--out", "mine"});
 }
 
 TEST_CASE("the launcher environment is read, and bad values are named", "[dist]") {
@@ -167,17 +170,20 @@ TEST_CASE("the launcher environment is read, and bad values are named", "[dist]"
   CHECK(e->master_addr == "node17");
   CHECK(e->master_port == 29611);
   set("RANK", "4");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK='4'"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK='4' must be an integer in [0, 3]"));
   set("RANK", "x1");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK='x1'"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK='x1' must be an integer in [0, 3]"));
   set("RANK", nullptr);
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("RANK is not"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("WORLD_SIZE is set (4) but RANK is not"));
   set("RANK", "0");
   set("MASTER_PORT", "70000");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("MASTER_PORT"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), 
+                    Catch::Contains("environment variable MASTER_PORT='70000' must be an integer in [1, 65535]"));
   for (const char* k : {"RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"}) set(k, nullptr);
   // NCCL is refused clearly where it cannot work.
-  CHECK_THROWS_WITH(th::dist::resolve_backend("nccl", torch::kCPU), Catch::Contains("nccl"));
+  CHECK_THROWS_WITH(th::dist::resolve_backend("nccl", torch::kCPU), 
+                    Catch::Contains("train.dist_backend=nccl but this LibTorch was built without NCCL") ||
+                        Catch::Contains("train.dist_backend=nccl needs device cuda"));
   CHECK(th::dist::resolve_backend("auto", torch::kCPU) == "gloo");
 }
 

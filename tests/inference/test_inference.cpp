@@ -100,7 +100,8 @@ TEST_CASE("too large renders and too fine mesh grids are refused before any work
   CHECK(!fs::exists(out / "mesh"));
   mesh.voxel = 0.01;
   mesh.threshold = -1;
-  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"), Catch::Contains(">= 0"));
+  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"), 
+                    Catch::Contains("mesh threshold must be a finite number >= 0, got -1"));
 
   VideoRequest r;
   r.width = 20000;

@@ -123,11 +123,14 @@ TEST_CASE("configurations combining incompatible switches are refused with a rea
     return std::string();
   };
   CHECK_THAT(refused([](ModelConfig& c) { c.fdi.appearance = false, c.fdi.human = false; }),
-             Catch::Contains("fdi"));
+             Catch::Contains("config key 'model.fdi' = {appearance: false, human: false}: at least one of the two "
+                             "branches must stay on"));
   CHECK_THAT(refused([](ModelConfig& c) { c.representation = "spc_trilinear", c.fdi.human = false; }),
-             Catch::Contains("fdi.human"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = "observation_grid"; }), Catch::Contains("position"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.dparf.nk = 0; }), Catch::Contains("nk"));
+             Catch::Contains("config key 'model.fdi.human' = false: the SPC + trilinear baseline"));
+  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = "observation_grid"; }), 
+             Catch::Contains("config key 'model.transhe.position' = canonical: observation-space grouping"));
+  CHECK_THAT(refused([](ModelConfig& c) { c.dparf.nk = 0; }), 
+             Catch::Contains("config key 'model.dparf.nk' = 0: must be between 1 and grouping.num_tokens"));
   CHECK(refused([](ModelConfig&) {}).empty());
 }
 

@@ -2,6 +2,7 @@
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <map>
 #include <set>
 
 #include "model/frame_fixture.hpp"
@@ -22,12 +23,12 @@ int64_t count_of(const std::vector<ParameterCount>& counts, const std::string& m
 
 // One training-like step: stratified rendering of the target view's rays, MSE to a random image.
 torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& frame, int64_t rays_side,
-                          int samples, bool checkpoint, int64_t chunk = 4096) {
+                          int samples, bool checkpoint, int64_t chunk = 4096, int64_t keep_graph_points = 0) {
   RenderConfig rc;
   rc.samples = samples;
   rc.chunk_points = chunk;
   const auto cache = model.prepare(frame.inputs);
-  FrameField field(model, cache, chunk, checkpoint);
+  FrameField field(model, cache, chunk, checkpoint, keep_graph_points);
   render::VolumeRenderer renderer(rc);
   const auto rays = test::target_rays(frame, rays_side);
   torch::manual_seed(11);  // same stratification for every call
@@ -100,6 +101,45 @@ TEST_CASE("checkpointed chunks give the same loss and gradients as plain autogra
     INFO(k);
     const double scale = g.abs().max().item<double>();
     CHECK((g - g2.at(k)).abs().max().item<double>() <= 1e-4 * scale + 1e-9);
+  }
+}
+
+TEST_CASE("train_recompute auto recomputes a field call above its threshold, with the same gradients bit for bit",
+          "[model][gradients][recompute]") {
+  torch::set_num_threads(1);
+  const auto frame = test::synthetic_frame();
+  torch::manual_seed(6);
+  TransHuman model(test::tiny_model_config());
+  model->train();
+  test::center_density(*model, frame);
+  // The in-box rays of a 24 x 24 grid, with enough samples for one field call above the
+  // threshold under which "auto" keeps the chunks' graphs: 17 or more chunks of 4,096.
+  const int64_t side = 24, chunk = 4096;
+  const int64_t rays = test::target_rays(frame, side).size();
+  REQUIRE(rays > 0);
+  const int samples = int(kKeepGraphPoints / rays + 1);
+  CAPTURE(rays, samples);
+  REQUIRE(rays * samples > kKeepGraphPoints);
+  RenderConfig rc;
+  auto grads = [&](const char* mode) {
+    rc.train_recompute = mode;
+    model->zero_grad();
+    render_loss(*model, frame, side, samples, true, chunk, keep_graph_points(rc)).backward();
+    std::map<std::string, torch::Tensor> g;
+    for (const auto& p : model->named_parameters()) g[p.key()] = p.value().grad().clone();
+    return g;
+  };
+  // "never" keeps the forward pass's graphs: the reference for the recomputed chunks of
+  // "always" and, above the threshold, of "auto".
+  const auto never = grads("never"), always = grads("always"), automatic = grads("auto");
+  CHECK(keep_graph_points(rc) == kKeepGraphPoints);
+  size_t zero = 0;
+  for (const auto& [k, g] : never) zero += g.abs().max().item<double>() == 0;
+  CHECK(zero <= 1);  // fdi.key0.bias (see above): the call trains every other parameter
+  for (const auto* other : {&always, &automatic}) {
+    size_t differing = 0;
+    for (const auto& [k, g] : never) differing += !torch::equal(g, other->at(k));
+    CHECK(differing == 0);
   }
 }
 

@@ -258,13 +258,19 @@ def main():
     probe = subprocess.run(mesh_cmd + ['--threshold', '1e9'], capture_output=True, text=True)
     median = re.search(r'median (-?[\d.]+)', probe.stderr + probe.stdout)
     assert median, 'transhuman-mesh did not report the density: ' + (probe.stderr + probe.stdout)[-1000:]
-    # Below the median (printed to one decimal): a surface exists unless six training steps left
+    # Below the median (printed to one decimal), and not below 0 (transhuman-mesh refuses a
+    # negative level, which would put the whole grid inside): a surface exists unless six training steps left
     # the field flat (it happens, depending on the draw); the viewer is then checked with the
     # frame's body mesh, coloured by height, written here as a PLY with vertex colours.
     level = float(median.group(1))
-    made = subprocess.run(mesh_cmd + ['--threshold', repr(level - max(0.5 * abs(level), 0.05))])
+    made = subprocess.run(mesh_cmd + ['--threshold', repr(max(0.0, level - max(0.5 * abs(level), 0.05)))],
+                          capture_output=True, text=True)
     plys = glob.glob(os.path.join(run_dir, 'mesh', '*.ply'))
-    if made.returncode == 0 and plys:
+    no_surface = made.returncode == 2 and 'never exceeds the threshold' in made.stderr
+    assert made.returncode == 0 or no_surface, \
+        f'transhuman-mesh failed (exit {made.returncode}): ' + made.stderr[-1000:]
+    if made.returncode == 0:
+        assert len(plys) == 1, f'transhuman-mesh succeeded but wrote {len(plys)} PLY files'
         ply = plys[0]
     else:
         print('the tiny model\'s density is flat: the viewer shows the body mesh instead', flush=True)

@@ -80,6 +80,7 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
   const fs::path dir = th::test::scratch_dir("ckcheck_truncated"), file = dir / "cut.pt";
   save_model_only(*model, file, true);
   std::string cut;
+  size_t largest_bytes = 0;
   rewrite_zip(file, [&](auto& members) {
     size_t largest = 0, best = 0;
     for (size_t i = 0; i < members.size(); ++i)
@@ -87,13 +88,16 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
         largest = members[best = i].second.size();
     REQUIRE(largest > 64);
     cut = members[best].first;
+    largest_bytes = largest;
     members[best].second.resize(largest / 2);
   });
   INFO("truncated " << cut);
   auto other = make_model(c);
   const std::string message = error_of([&] { th::pipeline::load_weights(*other, file); });
   CHECK_THAT(message, Catch::Contains(file.string()));
-  CHECK_THAT(message, Catch::Contains("storage") || Catch::Contains("cannot be read"));
+  CHECK_THAT(message, Catch::Contains(file.string() + "/" + cut + ": a storage record of " +
+                                      std::to_string(largest_bytes / 2) + " bytes where ") &&
+                          Catch::Contains(" elements of 4 bytes are claimed"));
 }
 
 TEST_CASE("non-finite weights are refused naming the tensor and the index", "[train][checkpoint]") {
@@ -156,14 +160,16 @@ TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]
   CHECK_NOTHROW(check_view({0, 1000000}, {1000000, 1}, 0, 0, "v"));  // empty
   CHECK_THAT(error_of([] { check_view({2, 3}, {3, 1}, 1, 6, "t.pt: a tensor"); }),
              Catch::Contains("t.pt: a tensor") && Catch::Contains("needs 7 elements"));
-  CHECK_THAT(error_of([] { check_view({4}, {-1}, 3, 6, "v"); }), Catch::Contains("negative"));
-  CHECK_THAT(error_of([] { check_view({-4}, {1}, 0, 6, "v"); }), Catch::Contains("negative"));
+  CHECK_THAT(error_of([] { check_view({4}, {-1}, 3, 6, "v"); }), Catch::Contains("has a negative size or stride"));
+  CHECK_THAT(error_of([] { check_view({-4}, {1}, 0, 6, "v"); }), Catch::Contains("has a negative size or stride"));
   CHECK_THAT(error_of([] { check_view({2}, {1}, -1, 6, "v"); }), Catch::Contains("before its storage"));
   // A 500-byte file must not become gigabytes: a stride-0 expansion is refused.
-  CHECK_THAT(error_of([] { check_view({1000000000, 1000}, {0, 0}, 0, 6, "v"); }), Catch::Contains("overlapping"));
+  CHECK_THAT(error_of([] { check_view({1000000000, 1000}, {0, 0}, 0, 6, "v"); }), Catch::Contains("views 1000000000000 elements of a storage of 6"));
   CHECK_THAT(error_of([] { check_view({int64_t{1} << 40, int64_t{1} << 40}, {1, 1}, 0, 6, "v"); }),
-             Catch::Contains("v ("));
-  CHECK_THAT(error_of([] { check_view({2, 3}, {3}, 0, 6, "v"); }), Catch::Contains("strides"));
+             Catch::Contains("has more elements than can be counted"));
+  CHECK_THAT(error_of([] { check_view({3}, {int64_t{1} << 62}, 0, 6, "v"); }),
+             Catch::Contains("reaches past any storage"));
+  CHECK_THAT(error_of([] { check_view({2, 3}, {3}, 0, 6, "v"); }), Catch::Contains("has 1 stride(s) for 2 size(s)"));
 }
 
 TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_mismatch=warn goes on",
