@@ -174,8 +174,11 @@ void orbit_section(const Setup& setup, Rows& rows, int views) {
   request.orbit_views = views;
   request.force = true;
   request.contact_sheet_frames = 0;
+  // Every round renders every view: an earlier round's frames would be resumed, not rendered.
+  const fs::path dir = setup.scratch / ("orbit_" + setup.path);
+  fs::remove_all(dir);
   const auto t0 = Clock::now();
-  const auto summary = inference::render_video(session, request, setup.scratch / ("orbit_" + setup.path));
+  const auto summary = inference::render_video(session, request, dir);
   const double sec = seconds_since(t0);
   rows.add("orbit", sec, setup.path + " | " + std::to_string(summary.rendered) + " | " + fmt(sec, 1) +
                              " | " + fmt(sec / std::max(summary.rendered, 1), 2));
