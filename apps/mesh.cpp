@@ -24,6 +24,8 @@ int main(int argc, char** argv) {
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
     cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)")
         ->check(th::app::at_least(0));
+    th::app::add_force_option(cli, options);
+    options.own_outputs = {"config.yaml", "log.txt", "*.ply", "*_preview.png"};
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
 

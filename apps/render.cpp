@@ -33,9 +33,15 @@ int main(int argc, char** argv) {
     cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)")
         ->check(th::app::at_least(1));
     cli.add_option("--height", request.height, "output height")->check(th::app::at_least(1));
-    cli.add_flag("--force", request.force, "replace frames of an earlier, different request in --out");
+    th::app::add_force_option(cli, options,
+                              "replace what --out holds: frames of an earlier, different request, or another "
+                              "command's outputs");
+    options.own_outputs = {"config.yaml", "log.txt", "frames", "request.yaml", "cameras.yaml", "video.mp4",
+                           "contact_sheet.png"};
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
+    request.force = options.force;
+    options.inputs.push_back({"the camera path (--path)", request.path_file});
     if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;
     if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;

@@ -54,8 +54,8 @@ check() {
   elif [[ $code -ne 0 ]] && { [[ $errors -ne 1 || "$last" != *": error: "* ]] || ! holds "$last" "$fragment"; }; then
     ok=FAIL
   elif [[ $code -eq 0 && -n $fragment ]]; then
-    last=$(printf '%s\n' "$err" | grep -m1 ' warning ')
-    holds "$last" "$fragment" || ok=FAIL
+    last=$(printf '%s\n' "$err" | grep ' warning ' | while IFS= read -r l; do holds "$l" "$fragment" && { echo "$l"; break; }; done)
+    [[ -n $last ]] || ok=FAIL
   fi
   [[ $ok == ok ]] || failures=$((failures + 1))
   last=${last//$work/…}
@@ -131,8 +131,13 @@ check "train into a folder holding a run" 2 "or --resume to continue the run" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --max-steps 1
 check "--resume with another model key" 2 "model.dparf.nk (run: 3, now: 1)" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --resume model.dparf.nk=1
+check "--resume with another seed" 2 "with other model, seed or data settings: seed (run: 42, now: 7)" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --resume seed=7
+cp -r "$work/run" "$work/run_badcfg" && echo "model: [unclosed" >"$work/run_badcfg/config.yaml"
+check "--resume with a corrupt config.yaml" 2 "cannot resume in '$work/run_badcfg': its config.yaml cannot be read (" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run_badcfg" --resume
 "${evaluate[@]}" $(on "$data") --out "$work/e_used" >/dev/null 2>&1
-check "eval into a folder holding results" 2 "already holds" "${evaluate[@]}" $(on "$data") --out "$work/e_used"
+check "eval into a folder holding results" 2 "--out '$work/e_used' already holds && : choose another folder, --force to replace its contents" "${evaluate[@]}" $(on "$data") --out "$work/e_used"
 
 # ---- 3. checkpoints ------------------------------------------------------------------------------
 "$py" - "$ckpt" "$work/cut.pt" <<'EOF'
@@ -206,8 +211,8 @@ check "evaluated with model.dparf.nk=2 and eval.model_mismatch=warn" 0 \
   eval.model_mismatch=warn eval.limit=1
 
 # ---- 4. resources are checked before work starts --------------------------------------------------
-check "--threads 100000" 2 "--threads" "$apps/transhuman-render" --threads 100000
-check "threads: 100000 in the config" 2 "threads=100000" \
+check "--threads 100000" 2 "--threads: Value 100000 not in range 0 to 4096" "$apps/transhuman-render" --threads 100000
+check "threads: 100000 in the config" 2 "config key 'threads' = 100000: must be in [0, 4096] (0: one per core)" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run threads=100000
 check "mesh --voxel 1e-4 (a 10^11-point grid)" 2 "estimated peak memory" \
   "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/m1" --voxel 1e-4 max_memory_gb=4
@@ -229,10 +234,10 @@ fi
 
 # ---- 6. invalid values are errors, never replaced by defaults ------------------------------------
 check "render --orbit 0" 2 "--orbit: must be >= 1, not 0" "$apps/transhuman-render" --orbit 0
-check "render --width -10" 2 "--width" "$apps/transhuman-render" --width -10
-check "mesh --frame -1" 2 "--frame" "$apps/transhuman-mesh" --frame -1
-check "eval --limit -5" 2 "--limit" "$apps/transhuman-eval" --limit -5
-check "train --max-steps -1" 2 "--max-steps" "$apps/transhuman-train" --max-steps -1
+check "render --width -10" 2 "--width: must be >= 1, not -10" "$apps/transhuman-render" --width -10
+check "mesh --frame -1" 2 "--frame: must be >= 0, not -1" "$apps/transhuman-mesh" --frame -1
+check "eval --limit -5" 2 "--limit: must be >= 0, not -5" "$apps/transhuman-eval" --limit -5
+check "train --max-steps -1" 2 "--max-steps: must be >= 0, not -1" "$apps/transhuman-train" --max-steps -1
 printf 'parent: %s\ntrain:\n  lr:\n' "$repo/configs/default.yaml" >"$work/null.yaml"
 check "lr: with no value" 2 "'train.lr' has no value" "$apps/transhuman-train" --dry-run --config "$work/null.yaml"
 printf 'parent: %s\nseed: 1\nseed: 2\n' "$repo/configs/default.yaml" >"$work/twice.yaml"
@@ -244,8 +249,8 @@ check "missing configs/default.yaml (run elsewhere)" 2 "does not exist" \
 check "a folder given as config" 2 "is a folder" "$apps/transhuman-train" --dry-run --config "$work"
 check "--dry-run when the data cannot be loaded" 2 "$work/nowhere" \
   "$apps/transhuman-train" "${tiny[@]}" --dry-run data.root="$work/nowhere" data.split_file="$data/split.yaml"
-check "unknown flag" 2 "--bogus" "$apps/transhuman-eval" --bogus
-check "value out of range (was a 300-digit CLI11 range)" 2 "--threads" "$apps/transhuman-train" --threads -5
+check "unknown flag" 2 "The following argument was not expected: --bogus" "$apps/transhuman-eval" --bogus
+check "value out of range (was a 300-digit CLI11 range)" 2 "--threads: Value -5 not in range 0 to 4096" "$apps/transhuman-train" --threads -5
 
 # ---- 7. images -----------------------------------------------------------------------------------
 d=$(copy truncated_jpeg)
@@ -259,6 +264,151 @@ for f in glob.glob(sys.argv[1] + '/*.png'):
     cv2.imwrite(f, cv2.resize(m, (m.shape[1] // 2, m.shape[0] // 2), interpolation=cv2.INTER_NEAREST))
 EOF
 check "mask and mask_cihp of different sizes" 2 "mask_cihp/Camera_B1/000000.png' is 64x64 but '$d/$person/mask/Camera_B1/000000.png' is 128x128" "${evaluate[@]}" $(on "$d") --out "$work/e_mask"
+
+# ---- 5. run folders: --force never removes an input; one writer per folder ------------------------
+# kept NAME PATH...: every PATH is still on disk (a row of its own).
+kept() {
+  local name=$1 ok=ok missing=
+  shift
+  for p in "$@"; do [[ -e $p ]] || { ok=FAIL; missing+=" ${p//$work/…}"; }; done
+  [[ $ok == ok ]] || failures=$((failures + 1))
+  rows+=("| $name | - | - | - | ${missing:-all still there} | $ok |")
+}
+sum_of() { md5sum "$1" | cut -d' ' -f1; }
+run_config=$(sum_of "$work/run/config.yaml")
+check "eval --out <the checkpoint's run> --force" 2 \
+  "--force would delete the checkpoint (--checkpoint) '$ckpt', an input of this command, which lies in --out '$work/run'" \
+  "${evaluate[@]}" $(on "$data") --out "$work/run" --force
+kept "  ... the run and its checkpoint" "$ckpt" "$work/run/config.yaml" "$work/run/metrics.jsonl"
+d=$(copy force_data)
+check "eval --out <the data root> --force" 2 "--force would delete the data root (data.root) '$d'" \
+  "${evaluate[@]}" $(on "$d") --out "$d" --force
+check "eval --out <a folder inside the data root> --force" 2 \
+  "--force would delete part of the data root (data.root) '$d', an input of this command: --out '$d/$person' lies inside it" \
+  "${evaluate[@]}" $(on "$d") --out "$d/$person" --force
+kept "  ... the data" "$d/$person/annots.npy" "$d/split.yaml"
+check "eval --config <run>/config.yaml --out <run> --force" 2 "--force would delete the config '$work/run/config.yaml'" \
+  "$apps/transhuman-eval" --config "$work/run/config.yaml" model.grouping.cache_dir="$work/kmeans" $(on "$data") \
+  --checkpoint "$ckpt" --out "$work/run" --force
+check "render --out <a training run>" 2 "--out '$work/run' already holds && that this command does not write" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/run" --orbit 2 --width 16 --height 16
+check "mesh --out <a training run> (and a failing mesh)" 2 "that this command does not write: choose another folder, --force" \
+  "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/run" --threshold 1e9
+if [[ $(sum_of "$work/run/config.yaml") == "$run_config" ]]; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+rows+=("| ... the run's config.yaml unchanged | - | - | - | md5 $run_config | $ok |")
+# A second writer while the first holds the folder's lock.
+cp -r "$work/run" "$work/locked"
+"$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/locked" --resume train.epochs=1000 >/dev/null 2>&1 &
+first=$!
+for _ in $(seq 600); do grep -q "pid $first" "$work/locked/.lock" 2>/dev/null && break; sleep 0.1; done
+check "a second train --resume on a folder in use" 2 "run folder '$work/locked' is in use by transhuman-train (pid $first on " \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/locked" --resume train.epochs=1000
+check "train --force on a folder in use" 2 "is in use by transhuman-train (pid $first on " \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/locked" --force
+kill "$first" 2>/dev/null; wait "$first" 2>/dev/null
+kept "  ... the folder in use" "$work/locked/checkpoints/latest.pt" "$work/locked/config.yaml"
+check_ok "train --resume once its writer has gone" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/locked" --resume --max-steps 1
+# The killed writer logged steps after its last checkpoint: the resumed run logs each step once.
+if "$py" - "$work/locked/metrics.jsonl" <<'EOF'; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
+steps = [r['step'] for r in rows if 'loss' in r]
+sys.exit(len(steps) != len(set(steps)))
+EOF
+rows+=("| ... metrics.jsonl holds each training step once after the resume | - | - | - | | $ok |")
+
+# ---- 4b. every config value in its range, refused by name before anything is written -------------
+for kv in "threads=-5|'threads' = -5: must be in [0, 4096]" "eval.limit=-3|'eval.limit' = -3: must be >= 0" \
+  "model.transhe.depth=-1|'model.transhe.depth' = -1: must be in [1, 64]" \
+  "model.transhe.mlp_dim=-5|'model.transhe.mlp_dim' = -5: must be positive" \
+  "train.beta1=2|'train.beta1' = 2: must be in [0, 1)" "model.transhe.dim=0|'model.transhe.dim' = 0: must be positive" \
+  "train.min_lr=1|'train.min_lr' = 1: must be in [0, train.lr]" \
+  "data.box_padding=.nan|'data.box_padding' = nan: must be a finite number >= 0" \
+  "data.box_padding=-1|'data.box_padding' = -1: must be a finite number >= 0" \
+  "train.dist_timeout_s=.inf|'train.dist_timeout_s' = inf: must be in (0, 86400] seconds" \
+  "data.ratio=0.001|'data.ratio' = 0.001: must be in [0.01, 1]" \
+  "render.samples=100000|'render.samples' = 100000: must be in [2, 4096]"; do
+  check "config ${kv%%|*}" 2 "config key ${kv#*|}" "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run \
+    --out "$work/range_${kv%%=*}" "${kv%%|*}"
+  [[ -e "$work/range_${kv%%=*}" ]] && { failures=$((failures + 1)); rows+=("| ... wrote $work/range_${kv%%=*} | | | | | FAIL |"); }
+done
+
+# Checks that can refuse a run come before its folder is written: a corrected rerun goes through.
+check "--device cuda without CUDA" 2 "device 'cuda' requested, but the linked LibTorch has no CUDA" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run --out "$work/no_cuda" --device cuda
+TH_MALLOC=bogus check "TH_MALLOC=bogus" 2 "environment variable TH_MALLOC='bogus'" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run --out "$work/no_cuda"
+if [[ -e "$work/no_cuda" ]]; then ok=FAIL; failures=$((failures + 1)); else ok=ok; fi
+rows+=("| ... no run folder written by the refused runs | - | - | - | | $ok |")
+
+# ---- 5a. calibration that cannot be right -----------------------------------------------------------
+# annots D KIND: KIND metres (every T given in metres), focal (camera 0's fx = 0), rotation (camera
+# 0's R doubled).
+annots() {
+  "$py" - "$1/$person/annots.npy" "$2" <<'EOF'
+import sys, numpy as np
+a = np.load(sys.argv[1], allow_pickle=True).item()
+c = a['cams']
+if sys.argv[2] == 'metres':
+    c['T'] = [np.asarray(t) / 1000.0 for t in c['T']]
+elif sys.argv[2] == 'focal':
+    c['K'][0] = np.array(c['K'][0], dtype=float); c['K'][0][0][0] = 0.0
+else:
+    c['R'][0] = np.array(c['R'][0], dtype=float) * 2
+np.save(sys.argv[1], a)
+EOF
+}
+d=$(copy calib_metres) && annots "$d" metres
+check "T in metres, not millimetres" 2 "$d/$person/annots.npy': reference camera && (data.calibration_check: warn to go on anyway)" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_metres"
+check "... with data.calibration_check=warn" 0 "annots.npy': reference camera && (data.calibration_check: warn; going on)" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_metres_warn" data.calibration_check=warn
+d=$(copy calib_focal) && annots "$d" focal
+check "a camera with focal length 0" 2 "$d/$person/annots.npy': camera 0: K has focal lengths fx = 0" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_focal"
+d=$(copy calib_rotation) && annots "$d" rotation
+check "a camera whose R is not a rotation" 2 "$d/$person/annots.npy': camera 0: R is not a rotation (" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_rotation"
+
+# ---- 5b. finite weights whose output overflows ----------------------------------------------------
+"$py" - "$ckpt" "$work/huge.pt" <<'EOF'
+import sys, torch
+m = torch.jit.load(sys.argv[1])
+with torch.no_grad():
+    for name, p in m.named_parameters():
+        if name.startswith('model.heads.') and p.dim() == 2:
+            p.mul_(1e30)
+m.save(sys.argv[2])
+EOF
+check "finite weights x1e30 (output overflows)" 2 \
+  "checkpoint '$work/huge.pt', $person frame && the network's output is not finite (" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/huge.pt" --out "$work/e_huge" eval.limit=1
+check "render with them" 2 "checkpoint '$work/huge.pt', $person frame && : the network's output is not finite (" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$work/huge.pt" --out "$work/r_huge" --orbit 1 \
+  --width 16 --height 16
+
+# ---- 6. special files where a file is expected: refused by name, never read -----------------------
+mkfifo "$work/fifo"
+check "a FIFO as --config" 2 "config file '$work/fifo' is a FIFO (named pipe), not a file" \
+  "$apps/transhuman-train" --dry-run --config "$work/fifo"
+check "a FIFO as --checkpoint" 2 "checkpoint '$work/fifo' is a FIFO (named pipe), not a file" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/fifo" --out "$work/e_fifo"
+check "a FIFO as the split file" 2 "split file '$work/fifo' is a FIFO (named pipe), not a file" \
+  "${evaluate[@]}" data.root="$data" data.split_file="$work/fifo" --out "$work/e_fifo_split"
+check "a FIFO as --path (camera path)" 2 "camera path file '$work/fifo' is a FIFO (named pipe), not a file" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/r_fifo" --path "$work/fifo"
+check "/dev/zero as --checkpoint" 2 "checkpoint '/dev/zero' is a character device, not a file" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint /dev/zero --out "$work/e_zero"
+d=$(copy fifo_image)
+img="$d/$person/Camera_B1/000000.jpg"
+rm "$img" && mkfifo "$img"
+check "a FIFO in place of an image" 2 "image '$img' is a FIFO (named pipe), not a file" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_fifo_image"
+d=$(copy fifo_annots)
+rm "$d/$person/annots.npy" && mkfifo "$d/$person/annots.npy"
+check "a FIFO in place of annots.npy" 2 "annotations '$d/$person/annots.npy' is a FIFO (named pipe), not a file" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_fifo_annots"
 
 table=$(
   echo "| case | expected exit | exit | seconds | last stderr line | |"

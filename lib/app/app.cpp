@@ -2,11 +2,19 @@
 
 #include <spdlog/spdlog.h>
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <iostream>
 #include <map>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/logging.hpp"
 #include "core/runtime.hpp"
 
@@ -62,20 +70,92 @@ CLI::Validator above(double bound) {
   return number_check([bound](double v) { return v > bound; }, "> " + CLI::detail::to_string(bound));
 }
 
-void add_force_option(CLI::App& cli, CommonOptions& o) {
-  cli.add_flag("--force", o.force, "replace what --out already holds");
+void add_force_option(CLI::App& cli, CommonOptions& o, const std::string& help) {
+  cli.add_flag("--force", o.force, help.empty() ? "replace what --out already holds" : help);
   o.guard_out = true;
 }
 
-void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume) {
+namespace {
+
+// The run folder's lock file: never listed, cleared or counted as the folder's contents.
+constexpr const char* kLockFile = ".lock";
+
+// `name` matches `pattern`: equal, or for "*suffix" ending in suffix.
+bool matches(const std::string& name, const std::string& pattern) {
+  if (pattern.empty() || pattern[0] != '*') return name == pattern;
+  const size_t n = pattern.size() - 1;
+  return name.size() >= n && name.compare(name.size() - n, n, pattern, 1, n) == 0;
+}
+
+// --force is about to clear `dir`: none of the command's inputs may be in it, and it may not be
+// part of one (a dataset, a run whose checkpoint is read).
+void refuse_clearing_inputs(const fs::path& dir, const Inputs& inputs) {
+  for (const auto& [what, path] : inputs) {
+    std::error_code ec;
+    if (path.empty() || !fs::exists(path, ec)) continue;
+    if (path_within(path, dir))
+      fail("--force would delete ", what, " '", path, "', an input of this command, which lies in --out '",
+           dir.string(), "': choose another --out (nothing was removed)");
+    if (path_within(dir, path))
+      fail("--force would delete part of ", what, " '", path, "', an input of this command: --out '", dir.string(),
+           "' lies inside it (nothing was removed)");
+  }
+}
+
+}  // namespace
+
+Inputs config_inputs(const Config& c, const std::string& config_file) {
+  Inputs in{{"the config", config_file},
+            {"the data root (data.root)", c.data.root},
+            {"the split file (data.split_file)", c.data.split_file},
+            {"the body model (data.smpl_model)", c.data.smpl_model},
+            {"the visibility files (data.visibility_root)", c.data.visibility_root},
+            {"the encoder weights (model.encoder.pretrained)", c.model.encoder.pretrained},
+            {"the k-means file (model.grouping.kmeans_file)", c.model.grouping.kmeans_file},
+            {"the LPIPS weights (train.lpips_weights)", c.train.lpips_weights},
+            {"the LPIPS weights (eval.lpips_weights)", c.eval.lpips_weights}};
+  return in;
+}
+
+void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume, const Inputs& inputs,
+                   const std::vector<std::string>& own_outputs, bool check_only) {
   std::error_code ec;
-  if (!fs::exists(dir, ec) || fs::is_empty(dir, ec)) return;
+  if (!fs::exists(dir, ec)) return;
   if (!fs::is_directory(dir, ec)) fail("--out '", dir.string(), "' is a file, not a folder");
+  // The folder's entries, those another command wrote first.
+  std::vector<std::string> entries, foreign;
+  for (const auto& e : fs::directory_iterator(dir)) {
+    const auto name = e.path().filename().string();
+    if (name == kLockFile) continue;
+    bool own = false;
+    for (const auto& pattern : own_outputs) own = own || matches(name, pattern);
+    (own ? entries : foreign).push_back(name);
+  }
+  entries.insert(entries.begin(), foreign.begin(), foreign.end());
+  if (entries.empty()) return;
   if (resume) {
     const fs::path previous = dir / "config.yaml";
     if (!fs::exists(previous)) fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
-    const auto before = config::leaves(YAML::LoadFile(previous.string())["model"], "model");
-    const auto now = config::leaves(resolved["model"], "model");
+    YAML::Node stored;
+    try {
+      stored = YAML::LoadFile(previous.string());
+    } catch (const YAML::Exception& e) {
+      fail("cannot resume in '", dir.string(), "': its config.yaml cannot be read (", e.what(), ")");
+    }
+    if (!stored.IsMap()) fail("cannot resume in '", dir.string(), "': its config.yaml is not a map of keys");
+    // The model, and what makes the run's samples what they were (seed, data).
+    auto before = config::leaves(stored["model"], "model");
+    auto now = config::leaves(resolved["model"], "model");
+    for (const char* key : {"seed", "data.dataset", "data.root", "data.split_file", "data.train_setting"}) {
+      const std::string k(key);
+      const size_t dot = k.find('.');
+      auto leaf = [&](const YAML::Node& root) {
+        const YAML::Node n = dot == std::string::npos ? root[k] : root[k.substr(0, dot)][k.substr(dot + 1)];
+        return n && n.IsScalar() ? n.Scalar() : std::string("absent");
+      };
+      before[k] = leaf(stored);
+      now[k] = leaf(resolved);
+    }
     std::string changed;
     for (const auto& [key, value] : now) {
       const auto it = before.find(key);
@@ -84,22 +164,52 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
                    ", now: " + value + ")";
     }
     if (!changed.empty())
-      fail("cannot resume the run in '", dir.string(), "' with other model settings: ", changed,
+      fail("cannot resume the run in '", dir.string(), "' with other model, seed or data settings: ", changed,
            " (start a new run in another folder, or --force to replace this one)");
     return;
   }
+  // A folder of this command's own outputs is continued (render, mesh).
+  if (!own_outputs.empty() && foreign.empty()) return;
   if (!force) {
+    const auto& listed = own_outputs.empty() ? entries : foreign;
     std::string some;
-    int n = 0;
-    for (const auto& e : fs::directory_iterator(dir)) {
-      if (n++ < 3) some += (some.empty() ? "" : ", ") + e.path().filename().string();
-    }
+    const size_t n = listed.size();
+    for (size_t i = 0; i < std::min<size_t>(n, 3); ++i) some += (i ? ", " : "") + listed[i];
     fail("--out '", dir.string(), "' already holds ", n, " entr", n == 1 ? "y" : "ies", " (", some, n > 3 ? ", ..." : "",
-         "): choose another folder, --force to replace its contents",
-         fs::exists(dir / "checkpoints") ? ", or --resume to continue the run" : "");
+         ")", own_outputs.empty() ? "" : " that this command does not write",
+         ": choose another folder, --force to replace its contents",
+         fs::exists(dir / "checkpoints") && own_outputs.empty() ? ", or --resume to continue the run" : "");
   }
-  for (const auto& e : fs::directory_iterator(dir)) fs::remove_all(e.path(), ec);
+  refuse_clearing_inputs(dir, inputs);
+  if (check_only) return;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().filename() != kLockFile) fs::remove_all(e.path(), ec);
   if (ec) fail("--force: cannot clear '", dir.string(), "': ", ec.message());
+}
+
+int lock_run_dir(const fs::path& dir, const std::string& app_name) {
+  const fs::path file = dir / kLockFile;
+  const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd < 0) fail("cannot open the run folder's lock file '", file.string(), "': ", std::strerror(errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    std::string holder;
+    std::getline(std::ifstream(file), holder);
+    ::close(fd);
+    if (err == EWOULDBLOCK)
+      fail("run folder '", dir.string(), "' is in use by ", holder.empty() ? "another process" : holder,
+           ": one writer at a time (wait for it to end, or choose another --out)");
+    fail("cannot lock the run folder '", dir.string(), "': ", std::strerror(err));
+  }
+  char host[256] = {};
+  ::gethostname(host, sizeof host - 1);
+  const std::string who = app_name + " (pid " + std::to_string(::getpid()) + " on " + host + ")\n";
+  if (::ftruncate(fd, 0) != 0 || ::pwrite(fd, who.data(), who.size(), 0) != ssize_t(who.size())) {
+    const int err = errno;
+    ::close(fd);
+    fail("cannot write the run folder's lock file '", file.string(), "': ", std::strerror(err));
+  }
+  return fd;
 }
 
 void add_model_options(CLI::App& cli, ModelOptions& m) {
@@ -110,6 +220,7 @@ void add_model_options(CLI::App& cli, ModelOptions& m) {
 
 void apply_model_options(const ModelOptions& m, CommonOptions& options) {
   if (!m.setting.empty()) options.overrides.push_back("eval.setting=" + m.setting);
+  options.inputs.push_back({"the checkpoint (--checkpoint)", m.checkpoint});
   if (!options.dry_run && m.checkpoint.empty()) fail("--checkpoint is required");
 }
 
@@ -127,14 +238,32 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   ctx.resolved = config::load_tree(o.config, overrides);
   ctx.config = config::from_tree<Config>(ctx.resolved);
   ctx.resolved = config::to_tree(ctx.config);  // every field, defaults included
+  // What can still refuse the run (TH_MALLOC, threads, the device) is checked before the run
+  // folder is touched, so that a corrected rerun is not refused by a folder a failed one wrote.
+  const bool own_malloc = runtime::keep_freed_memory();
+  const int threads = runtime::set_threads(ctx.config.threads);
+  ctx.device = runtime::select_device(ctx.config.device);
 
   const std::string out = !o.out.empty() ? o.out : default_out;
   if (!out.empty()) {
     ctx.run_dir = out;
-    if (o.guard_out) claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume);
+    auto inputs = config_inputs(ctx.config, o.config);
+    inputs.insert(inputs.end(), o.inputs.begin(), o.inputs.end());
+    // Checked before anything is written (a refused folder gets no lock file), then again
+    // under the lock, which a second writer cannot take, before --force clears the folder.
+    auto claim = [&](bool check_only) {
+      if (o.guard_out)
+        claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, check_only);
+    };
+    claim(true);
     std::error_code ec;
     fs::create_directories(ctx.run_dir, ec);
     if (ec) fail("cannot create run directory '", out, "': ", ec.message());
+    static int lock_fd = -1;  // held until the process ends; a later run folder replaces it
+    if (lock_fd >= 0) ::close(lock_fd);
+    lock_fd = -1;
+    lock_fd = lock_run_dir(ctx.run_dir, app_name);
+    claim(false);
     logging::add_file_sink(ctx.run_dir / "log.txt");
     config::write_yaml(ctx.run_dir / "config.yaml", ctx.resolved);
   }
@@ -142,9 +271,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   spdlog::info("{} | config {} | {}", app_name, o.config,
                ctx.run_dir.empty() ? "no run directory" : "run directory " + ctx.run_dir.string());
   runtime::log_blas();
-  if (!runtime::keep_freed_memory()) spdlog::debug("malloc: glibc defaults (TH_MALLOC=system)");
-  const int threads = runtime::set_threads(ctx.config.threads);
-  ctx.device = runtime::select_device(ctx.config.device);
+  if (!own_malloc) spdlog::debug("malloc: glibc defaults (TH_MALLOC=system)");
   spdlog::info("device {} | {} threads", ctx.device.str(), threads);
   return ctx;
 }

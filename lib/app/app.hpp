@@ -30,6 +30,14 @@ struct CommonOptions {
   bool guard_out = false;
   bool force = false;
   bool resume = false;
+  // What the command writes into --out, as entry names ("frames", "*.ply"): render and mesh
+  // continue in a folder holding only these; anything else makes --out another command's
+  // folder (refused unless --force). Empty: --out must be empty.
+  std::vector<std::string> own_outputs;
+  // Inputs named on the command line (what, path): --force never clears a folder that holds one
+  // or lies inside one. start_run adds the config's own (config file, data root, split file,
+  // body model, weights files).
+  std::vector<std::pair<std::string, std::string>> inputs;
 };
 
 // Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional
@@ -45,13 +53,28 @@ CLI::Validator finite_number();
 CLI::Validator at_least(double min);
 CLI::Validator above(double bound);  // a number > bound
 
-// Registers --force on `cli` and turns on the --out guard (training and evaluation).
-void add_force_option(CLI::App& cli, CommonOptions& options);
+// Registers --force on `cli` (with `help`, or the default text) and turns on the --out guard.
+void add_force_option(CLI::App& cli, CommonOptions& options, const std::string& help = "");
 
-// The --out guard of start_run: a folder that holds files is refused unless `force` (its
-// contents are removed) or `resume` (the model keys of its config.yaml must equal `resolved`'s;
-// those that differ are named). Throws th::Error.
-void claim_run_dir(const std::filesystem::path& dir, const YAML::Node& resolved, bool force, bool resume);
+// A named input of a command (what it is, where).
+using Inputs = std::vector<std::pair<std::string, std::string>>;
+
+// The --out guard of start_run: a folder that holds entries other than `own_outputs` (and the
+// lock file) is refused unless `force` (its contents are removed, after checking that none of
+// `inputs` lies inside it and that it lies inside none of them) or `resume` (the model keys
+// of its config.yaml must equal `resolved`'s; those that differ are named). Throws th::Error.
+// With `check_only`, every check runs and nothing is removed.
+void claim_run_dir(const std::filesystem::path& dir, const YAML::Node& resolved, bool force, bool resume,
+                   const Inputs& inputs = {}, const std::vector<std::string>& own_outputs = {},
+                   bool check_only = false);
+
+// The inputs a config names (config file, data root, split file, body model, weights files).
+Inputs config_inputs(const Config& config, const std::string& config_file);
+
+// Takes the run folder's lock (flock on `dir`/.lock, held until the process exits): a second
+// writer is refused, naming the holder's command, pid and host. Returns the lock file's
+// descriptor.
+int lock_run_dir(const std::filesystem::path& dir, const std::string& app_name);
 
 // What the commands that use a trained model share (eval, render, mesh): the checkpoint and
 // the split setting whose people and reference views they use.

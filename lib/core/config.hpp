@@ -37,6 +37,9 @@ struct DataConfig {
   std::string visibility_root = "";              // for visibility: files (NHP's zju_rasterization)
   std::string visibility_missing = "error";      // files: a missing file is an error | all_visible (warns)
   double box_padding = 0.05;                     // world AABB padding on z (metres)
+  // Calibration that cannot be right (intrinsics, rotations, the body out of a reference view or
+  // at an implausible distance; data/calibration.hpp): an error, or a warning.
+  std::string calibration_check = "error";       // error | warn
   // Target mask border band (SPEC 2.1 step 6): marked on the distorted mask before undistortion
   // [parity], or on the undistorted one.
   std::string border_band = "distorted";         // distorted | undistorted
@@ -215,6 +218,7 @@ template <class V> void visit_fields(V& v, DataConfig& c) {
   v("visibility_root", c.visibility_root);
   v.choice("visibility_missing", c.visibility_missing, {"error", "all_visible"});
   v("box_padding", c.box_padding);
+  v.choice("calibration_check", c.calibration_check, {"error", "warn"});
   v.choice("border_band", c.border_band, {"distorted", "undistorted"});
   v("patch", c.patch);
   v("jitter", c.jitter);
@@ -330,5 +334,7 @@ void validate_section(const DataConfig& c, const std::string& path);
 void validate_section(const ModelConfig& c, const std::string& path);
 void validate_section(const RenderConfig& c, const std::string& path);
 void validate_section(const TrainConfig& c, const std::string& path);
+void validate_section(const EvalConfig& c, const std::string& path);
+void validate_section(const Config& c, const std::string& path);
 
 }  // namespace th

@@ -5,6 +5,8 @@
 #include <set>
 #include <sstream>
 
+#include "core/files.hpp"
+
 namespace th::config {
 namespace fs = std::filesystem;
 
@@ -72,14 +74,22 @@ void check_values(const YAML::Node& node, const std::string& path, const fs::pat
   }
 }
 
+// Bounds on what a config may be, checked before it is parsed.
+constexpr size_t kMaxParents = 32;
+constexpr uintmax_t kMaxConfigBytes = uintmax_t{1} << 20;
+
 YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
   std::error_code ec;
   const fs::path canonical = fs::weakly_canonical(file, ec);
-  if (fs::is_directory(file)) fail("config file '", file.string(), "' is a folder, not a file");
+  refuse_special_file(file, "config file");
   if (!fs::is_regular_file(file)) fail("config file '", file.string(), "' does not exist");
   if (std::find(chain.begin(), chain.end(), canonical) != chain.end())
     fail("config file '", file.string(), "' is its own parent (inheritance cycle)");
+  if (chain.size() >= kMaxParents)
+    fail("config file '", file.string(), "': more than ", kMaxParents, " parent configs above it");
   chain.push_back(canonical);
+  if (const auto bytes = fs::file_size(file, ec); !ec && bytes > kMaxConfigBytes)
+    fail("config file '", file.string(), "' is ", bytes, " bytes, more than a config may be (", kMaxConfigBytes, ")");
 
   YAML::Node node;
   try {

@@ -12,6 +12,7 @@
 #include "body/smpl.hpp"
 #include "body/visibility.hpp"
 #include "core/error.hpp"
+#include "data/calibration.hpp"
 #include "data/h36m.hpp"
 #include "data/rays.hpp"
 #include "geometry/camera.hpp"
@@ -20,12 +21,19 @@ namespace th::data {
 
 namespace {
 
-// Each distinct message once per process (the loader threads share it).
-void warn_once(const std::string& message) {
+// Each distinct key's message once per process (the loader threads share it).
+void warn_once(const std::string& message, const std::string& key = "") {
   static std::mutex mutex;
   static std::set<std::string> said;
   std::lock_guard<std::mutex> lock(mutex);
-  if (said.insert(message).second) spdlog::warn("{}", message);
+  if (said.insert(key.empty() ? message : key).second) spdlog::warn("{}", message);
+}
+
+// Calibration that cannot be right: an error, or (data.calibration_check: warn) one warning
+// per `key` (a camera of a person).
+void implausible(const std::string& policy, const std::string& message, const std::string& key) {
+  if (policy == "error") fail(message, " (data.calibration_check: warn to go on anyway)");
+  warn_once(message + " (data.calibration_check: warn; going on)", key);
 }
 
 }  // namespace
@@ -67,6 +75,14 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
   for (const auto& range : setting_.humans) {
     auto human = HumanSequence::open(human_folder(config.root, range.name, config.dataset));
     const int h = int(humans_.size());
+    for (int c = 0; c < human->num_cameras(); ++c) {
+      const auto& cam = human->camera(c);
+      const std::string why = implausible_camera(cam.K, cam.R);
+      if (!why.empty())
+        implausible(config.calibration_check,
+                    "'" + (human->dir() / "annots.npy").string() + "': camera " + std::to_string(c) + ": " + why,
+                    human->dir().string() + "#K" + std::to_string(c));
+    }
     auto check_view = [&](int v, const char* what) {
       if (v < 0 || v >= human->num_cameras())
         fail("split '", setting, "': ", what, " view ", v, " does not exist for ", range.name,
@@ -145,6 +161,13 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   for (int v : s.reference_views) {
     const ViewImage view =
         load_view(human, it.frame, v, {config_.ratio, false, jittered ? &jitter : nullptr});
+    const std::string why = implausible_view(s.body.vertices, view.camera.K, view.camera.R, view.camera.T,
+                                             view.rgb.cols, view.rgb.rows);
+    if (!why.empty())
+      implausible(config_.calibration_check,
+                  "'" + (human.dir() / "annots.npy").string() + "': reference camera " + std::to_string(v) +
+                      " of frame " + std::to_string(it.frame) + ": " + why,
+                  human.dir().string() + "#view" + std::to_string(v));
     images.push_back(image_tensor(view.rgb).permute({2, 0, 1}));
     Ks.push_back(view.camera.K);
     Rs.push_back(view.camera.R);

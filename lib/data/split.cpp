@@ -3,11 +3,13 @@
 #include <yaml-cpp/yaml.h>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 
 namespace th::data {
 namespace {
 
 YAML::Node load_settings(const std::filesystem::path& file) {
+  refuse_special_file(file, "split file");
   if (!std::filesystem::is_regular_file(file)) fail("split file '", file.string(), "' does not exist");
   YAML::Node root;
   try {

@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "geometry/camera.hpp"
 #include "io/npy.hpp"
 
@@ -73,6 +74,7 @@ cv::Mat to_unit_float(const cv::Mat& u8) {
 }
 
 cv::Mat read_image(const fs::path& path, int flags) {
+  refuse_special_file(path, "image");
   cv::Mat img = cv::imread(path.string(), flags);
   if (img.empty()) fail("cannot read image '", path.string(), "' (missing or corrupt)");
   std::string ext = path.extension().string();
@@ -118,6 +120,7 @@ int frame_number_of(const std::string& filename) {
 std::shared_ptr<HumanSequence> HumanSequence::open(const fs::path& dir) {
   if (!fs::is_directory(dir)) fail("human folder '", dir.string(), "' does not exist");
   const fs::path file = dir / "annots.npy";
+  refuse_special_file(file, "annotations");
   if (!fs::is_regular_file(file))
     fail("'", file.string(), "' is missing (every human folder needs its annots.npy)");
   const io::Value annots = io::read_npy_value(file);

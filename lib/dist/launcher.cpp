@@ -3,6 +3,7 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -79,6 +80,36 @@ std::vector<std::string> worker_args(int argc, const char* const* argv, const st
   return args;
 }
 
+namespace {
+
+// The last SIGTERM, SIGINT or SIGHUP the launcher received (0: none), for forwarding.
+volatile sig_atomic_t g_received = 0;
+void remember_signal(int sig) { g_received = sig; }
+
+// Installs remember_signal for the stop signals while the launcher waits (no SA_RESTART, so
+// waitpid returns EINTR), and restores the previous handlers when it goes.
+class ForwardSignals {
+ public:
+  ForwardSignals() {
+    g_received = 0;
+    struct sigaction sa {};
+    sa.sa_handler = remember_signal;
+    sigemptyset(&sa.sa_mask);
+    for (size_t i = 0; i < std::size(kSignals); ++i) ::sigaction(kSignals[i], &sa, &previous_[i]);
+  }
+  ~ForwardSignals() {
+    for (size_t i = 0; i < std::size(kSignals); ++i) ::sigaction(kSignals[i], &previous_[i], nullptr);
+  }
+  ForwardSignals(const ForwardSignals&) = delete;
+  ForwardSignals& operator=(const ForwardSignals&) = delete;
+
+ private:
+  static constexpr int kSignals[] = {SIGTERM, SIGINT, SIGHUP};
+  struct sigaction previous_[3];
+};
+
+}  // namespace
+
 int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
   if (args.empty()) fail("launch_local: no program");
   if (o.nproc < 1) fail("--nproc must be at least 1 (got ", o.nproc, ")");
@@ -92,6 +123,9 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
   std::vector<char*> argv;
   for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
   argv.push_back(nullptr);
+  // A stop signal to the launcher goes to every rank, and the launcher waits for them.
+  ForwardSignals forward;
+  const pid_t launcher = ::getpid();
   for (int r = 0; r < o.nproc; ++r) {
     // The environment is built before fork: the child only calls async-signal-safe functions.
     std::vector<std::string> env_strings;
@@ -119,6 +153,12 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
       fail("cannot start worker ", r, ": ", std::strerror(errno));
     }
     if (pid == 0) {
+      // A rank dies with the launcher, also when the launcher is killed (SIGKILL) and cannot
+      // forward anything; a launcher gone before this line is seen by getppid.
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (::getppid() != launcher) ::_exit(128 + SIGTERM);
+      // The handlers of the launcher do not survive execve; the signal mask and ignored
+      // signals would, and none are set here.
       ::execve(argv[0], argv.data(), envp.data());
       (void)!::write(2, exec_error.data(), exec_error.size());
       ::_exit(127);
@@ -126,10 +166,21 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
     pids[size_t(r)] = pid;
   }
 
-  int first_failure = 0, running = o.nproc;
+  int first_failure = 0, running = o.nproc, stopped_by = 0;
   Clock::time_point deadline;
   bool terminated = false;
   while (running > 0) {
+    if (g_received && !stopped_by) {
+      // Forwarded once; a rank still running after the timeout is terminated as after a failure.
+      stopped_by = g_received;
+      std::cerr << "launcher: " << strsignal(stopped_by) << ": passing it to the " << running
+                << " running rank(s) and waiting for them" << std::endl;
+      terminate_all(stopped_by);
+      if (!first_failure) {
+        first_failure = 128 + stopped_by;
+        deadline = Clock::now() + std::chrono::milliseconds(int64_t(o.timeout_s * 1000) + 5000);
+      }
+    }
     int status = 0;
     const pid_t pid = ::waitpid(-1, &status, first_failure ? WNOHANG : 0);
     if (pid < 0) {
@@ -157,7 +208,7 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o) {
     if (rank < 0) continue;
     --running;
     const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-    if (!ok) {
+    if (!ok && !(stopped_by && WIFSIGNALED(status) && WTERMSIG(status) == stopped_by)) {
       std::cerr << "launcher: rank " << rank << " " << describe(status) << std::endl;
       if (!first_failure) {
         first_failure = exit_code(status);

@@ -19,6 +19,9 @@ struct LaunchOptions {
 // Runs `args` (program path first) as `nproc` workers and waits for them. Returns 0 when every
 // worker succeeded, otherwise the exit status of the first that failed (128 + signal when it was
 // killed); reports each failure on stderr. Throws th::Error when a worker cannot be started.
+// SIGTERM, SIGINT or SIGHUP to the launcher is passed to every worker and the launcher waits for
+// them (returning 128 + that signal); a worker is sent SIGTERM when the launcher dies, even by
+// SIGKILL (PR_SET_PDEATHSIG).
 int launch_local(const std::vector<std::string>& args, const LaunchOptions& options);
 
 // The workers' command line for `transhuman-train --nproc N ...` (argc/argv as main got them):

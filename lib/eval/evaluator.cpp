@@ -6,11 +6,13 @@
 #include <cmath>
 #include <fstream>
 #include <numeric>
+#include <sstream>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/progress.hpp"
 #include "data/dataset.hpp"
+#include "io/bytes.hpp"
 #include "metrics/lpips.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/images.hpp"
@@ -30,25 +32,32 @@ std::string fmt(double v, int digits) {
   return buf;
 }
 
+// A CSV field (RFC 4180): quoted, with its quotes doubled, when it holds a comma, a quote or a
+// line break (a person's folder name may).
+std::string csv_field(const std::string& text) {
+  if (text.find_first_of(",\"\r\n") == std::string::npos) return text;
+  std::string out = "\"";
+  for (const char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+  return out + "\"";
+}
+
+// Each file is written whole or not at all (a full disk names the file that failed).
 void write_outputs(const EvalSummary& s, const fs::path& dir) {
-  {
-    std::ofstream csv(dir / "per_image.csv");
-    csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points\n";
-    for (const auto& r : s.per_image)
-      csv << r.human << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
-          << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ','
-          << r.points << ',' << r.culled_points << ',' << r.evaluated_points << '\n';
-  }
-  {
-    pipeline::JsonLine j;
-    j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
-        .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
-        .add("seconds_per_image", s.seconds_per_image)
-        .add("opaque_rays_1e-3", s.opaque_1e3)
-        .add("opaque_rays_1e-4", s.opaque_1e4);
-    std::ofstream(dir / "summary.json") << j.str() << '\n';
-  }
-  std::ofstream(dir / "results.md") << markdown_table({s});
+  std::ostringstream csv;
+  csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points\n";
+  for (const auto& r : s.per_image)
+    csv << csv_field(r.human) << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
+        << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ',' << r.points << ','
+        << r.culled_points << ',' << r.evaluated_points << '\n';
+  io::detail::write_file_atomic(dir / "per_image.csv", csv.str());
+  pipeline::JsonLine j;
+  j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
+      .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
+      .add("seconds_per_image", s.seconds_per_image)
+      .add("opaque_rays_1e-3", s.opaque_1e3)
+      .add("opaque_rays_1e-4", s.opaque_1e4);
+  io::detail::write_file_atomic(dir / "summary.json", j.str() + "\n");
+  io::detail::write_file_atomic(dir / "results.md", markdown_table({s}));
 }
 
 }  // namespace
@@ -98,8 +107,13 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   for (size_t i = 0; i < n; ++i) {
     const data::Sample s = loader.next();
     const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
-    const auto r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
-                                           config.eval.reuse_frames ? &frames : nullptr);
+    pipeline::ViewResult r;
+    try {
+      r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
+                                  config.eval.reuse_frames ? &frames : nullptr);
+    } catch (const Error& e) {
+      fail("checkpoint '", checkpoint.string(), "', ", e.what());
+    }
     rays += r.rays, opaque_1e3 += r.opaque_1e3, opaque_1e4 += r.opaque_1e4;
     summary.per_image.push_back({s.human, s.frame, s.target_view, r.psnr, r.ssim, r.lpips, r.seconds,
                                  r.stats.points, r.stats.culled_points, r.stats.density_points});

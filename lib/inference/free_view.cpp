@@ -5,6 +5,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
+#include <map>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -45,11 +46,16 @@ std::vector<int> parse_frame_range(const std::string& text) {
   if (parts.size() == 1) return parts;
   if (parts.size() < 2 || parts.size() > 3)
     fail("frame range '", text, "': expected FRAME, BEGIN:END or BEGIN:END:STEP");
-  const int step = parts.size() == 3 ? parts[2] : 1;
+  const int64_t begin = parts[0], end = parts[1], step = parts.size() == 3 ? parts[2] : 1;
   if (step <= 0) fail("frame range '", text, "': the step must be positive");
+  if (begin < 0) fail("frame range '", text, "': frames are numbered from 0");
+  if (end <= begin) fail("frame range '", text, "' is empty");
+  // Counted before anything is allocated (int64: no overflow near INT_MAX).
+  const int64_t count = (end - begin + step - 1) / step;
+  if (count > kMaxVideoFrames)
+    fail("frame range '", text, "' holds ", count, " frames, more than a video may have (", kMaxVideoFrames, ")");
   std::vector<int> frames;
-  for (int f = parts[0]; f < parts[1]; f += step) frames.push_back(f);
-  if (frames.empty()) fail("frame range '", text, "' is empty");
+  for (int64_t f = begin; f < end; f += step) frames.push_back(int(f));
   return frames;
 }
 
@@ -114,11 +120,16 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     }
     const auto orbit = video::make_orbit(torch::stack(Rs), torch::stack(Ts));
     const int n = request.orbit_views > 0 ? request.orbit_views : (frames.size() > 1 ? int(frames.size()) : 36);
+    if (n > kMaxVideoFrames)
+      fail("--orbit ", n, ": more views than a video may have (", kMaxVideoFrames, ")");
     count = std::max(int(frames.size()), n);
+    std::map<int, torch::Tensor> centers;  // one body per frame shown, not per view
     for (int k = 0; k < count; ++k) {  // looking at the centre of the body of the frame shown
       const int frame = frames[size_t(k) % frames.size()];
+      auto it = centers.find(frame);
+      if (it == centers.end()) it = centers.emplace(frame, session.body_center(h, frame)).first;
       const double theta = 2.0 * M_PI * double(k % n) / double(n);
-      shots.push_back(video::orbit_camera(orbit, K, session.body_center(h, frame), theta));
+      shots.push_back(video::orbit_camera(orbit, K, it->second, theta));
     }
   } else {
     if (request.cameras == Cameras::PathFile) {

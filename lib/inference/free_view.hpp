@@ -46,8 +46,12 @@ struct VideoSummary {
 VideoSummary render_video(const Session& session, const VideoRequest& request,
                           const std::filesystem::path& out_dir);
 
+// The most frames (and cameras) one video may have: an hour at 30 fps.
+constexpr int64_t kMaxVideoFrames = 108000;
+
 // "12" -> {12}; "0:60" -> 0..59; "0:60:5" -> 0, 5, ..., 55 (end exclusive, as Python's
-// range). Throws th::Error quoting the text when it is malformed or empty.
+// range). Throws th::Error quoting the text when it is malformed, empty, negative or longer
+// than kMaxVideoFrames.
 std::vector<int> parse_frame_range(const std::string& text);
 
 // K for an image resized by sx along x and sy along y: rows 0 and 1 scaled, without a

@@ -9,6 +9,7 @@
 #include "core/error.hpp"
 #include "data/rays.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/pipeline.hpp"
 
 namespace th::inference {
 namespace fs = std::filesystem;
@@ -111,6 +112,8 @@ torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamer
     const auto result = model::render_rays(*model_, frame.cache, r, config_.render);
     image.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
   }
+  pipeline::require_finite_output(image, "checkpoint '" + checkpoint_.string() + "', " + frame.sample.human +
+                                             " frame " + std::to_string(frame.sample.frame));
   return image.view({height, width, 3});
 }
 

@@ -10,10 +10,12 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 
 namespace th::io::detail {
 
 std::string read_file(const std::filesystem::path& path) {
+  refuse_special_file(path, "input");
   std::ifstream in(path, std::ios::binary);
   if (!in) th::fail("cannot open '", path.string(), "': ", std::strerror(errno));
   std::ostringstream buffer;

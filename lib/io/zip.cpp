@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "io/bytes.hpp"
 
 namespace th::io::detail {
@@ -83,7 +84,10 @@ std::string MemorySource::read(uint64_t offset, uint64_t n) const {
   return std::string(bytes_.substr(static_cast<size_t>(offset), static_cast<size_t>(n)));
 }
 
-FileSource::FileSource(const std::filesystem::path& path) : path_(path), in_(path, std::ios::binary) {
+// path_ is initialised first: a FIFO or a device is refused before the stream opens it (which
+// would block on a FIFO).
+FileSource::FileSource(const std::filesystem::path& path)
+    : path_((refuse_special_file(path, "input"), path)), in_(path, std::ios::binary) {
   std::error_code ec;
   size_ = std::filesystem::file_size(path, ec);
   if (!in_ || ec) th::fail("cannot open '", path.string(), "'", ec ? ": " + ec.message() : std::string());

@@ -11,6 +11,7 @@
 
 #include "core/config_io.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "io/pickle.hpp"
 #include "io/zip.hpp"
 
@@ -87,6 +88,7 @@ void check_storage_records(const io::detail::ZipSource& source, const std::vecto
 
 void check_checkpoint_archive(const fs::path& path) {
   if (!fs::exists(path)) fail("checkpoint '", path.string(), "' does not exist");
+  refuse_special_file(path, "checkpoint");
   // Storage records are stored (torch.save and LibTorch align them for memory mapping); LibTorch
   // deflates only its small code/ entries. A compressed member is bounded before it is inflated.
   constexpr uint64_t kMaxInflated = uint64_t{64} << 20;

@@ -4,6 +4,7 @@
 
 #include <chrono>
 
+#include "core/error.hpp"
 #include "metrics/metrics.hpp"
 
 namespace th::pipeline {
@@ -75,6 +76,8 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.stats = result.stats;
   const auto rgb = result.rgb.to(torch::kCPU, torch::kFloat32);
+  require_finite_output(rgb, sample.human + " frame " + std::to_string(sample.frame) + " view " +
+                                 std::to_string(sample.target_view));
   r.acc_max = result.acc.numel() ? result.acc.max().item<double>() : 0.0;
   r.rays = result.acc.numel();
   r.opaque_1e3 = (1 - result.acc.to(torch::kDouble) < 1e-3).sum().item<int64_t>();
@@ -90,6 +93,13 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
     r.lpips = lpips->forward(nchw(crop.pred), nchw(crop.gt)).item<double>();
   }
   return r;
+}
+
+void require_finite_output(const torch::Tensor& rgb, const std::string& what) {
+  const int64_t bad = rgb.numel() - torch::isfinite(rgb).sum().item<int64_t>();
+  if (bad == 0) return;
+  fail(what, ": the network's output is not finite (", bad, " of ", rgb.numel(),
+       " values NaN or infinite): weights that are finite but overflow? nothing was scored or written for it");
 }
 
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,

@@ -84,6 +84,11 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rende
                          metrics::LpipsImpl* lpips, const torch::Device& device,
                          FrameReuse* frames = nullptr);
 
+// Fails unless every value of the network's output `rgb` is finite, naming `what` (the
+// checkpoint and the view) and how many values are NaN or infinite: finite weights can still
+// overflow, and such an output must not become a score or an image.
+void require_finite_output(const torch::Tensor& rgb, const std::string& what);
+
 // Scatters per-ray colours into an image (H, W, 3), black elsewhere.
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,
                             int64_t width);

@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -12,6 +13,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "eval/evaluator.hpp"
 
 namespace th::report {
@@ -85,27 +87,35 @@ std::string utc_now() {
   return buf;
 }
 
-// True when `path` lies inside `dir` (both made absolute and normal first).
-bool is_under(const fs::path& path, const fs::path& dir) {
-  const auto p = fs::weakly_canonical(fs::absolute(path)), d = fs::weakly_canonical(fs::absolute(dir));
-  auto pi = p.begin();
-  for (auto di = d.begin(); di != d.end(); ++di, ++pi) {
-    if (di->empty()) continue;  // a trailing separator
-    if (pi == p.end() || *pi != *di) return false;
+
+// A path segment with every byte but RFC 3986's unreserved ones percent-encoded.
+std::string percent_encoded(const std::string& segment) {
+  static const char* hex = "0123456789ABCDEF";
+  std::string s;
+  for (const unsigned char c : segment) {
+    if (std::isalnum(c) || c == '-' || c == '.' || c == '_' || c == '~') {
+      s += char(c);
+    } else {
+      s += '%';
+      s += hex[c >> 4];
+      s += hex[c & 15];
+    }
   }
-  return true;
+  return s;
 }
 
-// `path` as the page refers to it: relative to `out`, with forward slashes.
+// `path` as the page refers to it: relative to `out`, "./" first and each folder name
+// percent-encoded, so that no name (a folder called "javascript:...") becomes a URL scheme.
 std::string href(const fs::path& path, const fs::path& out) {
-  return fs::weakly_canonical(fs::absolute(path))
-      .lexically_relative(fs::weakly_canonical(fs::absolute(out)))
-      .generic_string();
+  const auto rel = fs::weakly_canonical(fs::absolute(path)).lexically_relative(fs::weakly_canonical(fs::absolute(out)));
+  std::string s = ".";
+  for (const auto& part : rel) s += "/" + percent_encoded(part.string());
+  return s;
 }
 
 // `src` itself when it already lies inside `out`, else a copy at out/<dest>.
 fs::path bring_in(const fs::path& src, const fs::path& out, const fs::path& dest) {
-  if (is_under(src, out)) return src;
+  if (path_within(src, out)) return src;
   const fs::path target = out / dest;
   fs::create_directories(target.parent_path());
   fs::copy_file(src, target, fs::copy_options::overwrite_existing);
@@ -118,6 +128,34 @@ struct CsvRow {
   int frame = 0, view = 0;
 };
 
+// One CSV line's fields (RFC 4180: a quoted field may hold commas and doubled quotes).
+std::vector<std::string> csv_fields(const std::string& line) {
+  std::vector<std::string> out;
+  for (size_t i = 0; i <= line.size();) {
+    if (i < line.size() && line[i] == '"') {
+      std::string v;
+      for (++i; i < line.size();) {
+        if (line[i] != '"') {
+          v += line[i++];
+        } else if (i + 1 < line.size() && line[i + 1] == '"') {
+          v += '"';
+          i += 2;
+        } else {
+          ++i;
+          break;
+        }
+      }
+      out.push_back(v);
+      ++i;  // the comma after the closing quote
+    } else {
+      const size_t end = std::min(line.find(',', i), line.size());
+      out.push_back(line.substr(i, end - i));
+      i = end + 1;
+    }
+  }
+  return out;
+}
+
 std::vector<CsvRow> csv_rows(const std::string& csv, const fs::path& file) {
   std::vector<CsvRow> rows;
   std::stringstream in(csv);
@@ -127,13 +165,12 @@ std::vector<CsvRow> csv_rows(const std::string& csv, const fs::path& file) {
     fail("report: '", file.string(), "' is not an evaluator per_image.csv (header '", line, "')");
   while (std::getline(in, line)) {
     if (line.empty()) continue;
-    std::stringstream fields(line);
+    const auto fields = csv_fields(line);
+    if (fields.size() < 3) fail("report: '", file.string(), "': bad row '", line, "'");
     CsvRow r;
-    std::string frame, view;
-    if (!std::getline(fields, r.human, ',') || !std::getline(fields, frame, ',') || !std::getline(fields, view, ','))
-      fail("report: '", file.string(), "': bad row '", line, "'");
-    r.frame = std::atoi(frame.c_str());
-    r.view = std::atoi(view.c_str());
+    r.human = fields[0];
+    r.frame = std::atoi(fields[1].c_str());
+    r.view = std::atoi(fields[2].c_str());
     rows.push_back(r);
   }
   return rows;
@@ -155,7 +192,7 @@ std::string eval_js(const fs::path& eval, const fs::path& out, const std::string
   std::string files = "{";
   for (const char* name : {"summary.json", "per_image.csv", "results.md", "config.yaml", "index.html"}) {
     // The evaluation's own page is linked, not copied: its links are relative to its folder.
-    if (!fs::exists(eval / name) || (std::string(name) == "index.html" && !is_under(eval, out))) continue;
+    if (!fs::exists(eval / name) || (std::string(name) == "index.html" && !path_within(eval, out))) continue;
     if (std::string(name) == "index.html" && fs::equivalent(eval, out)) continue;
     files += std::string(files.size() > 1 ? "," : "") + js_string(name) + ":" +
              js_string(href(bring_in(eval / name, out, fs::path(copy_name) / name), out));
@@ -258,6 +295,15 @@ fs::path find_three_js() {
 
 fs::path write_page(const PageSources& sources, const fs::path& out) {
   if (sources.evals.empty()) fail("report: no evaluation folder to show");
+  for (const auto& [label, target] : sources.links) {
+    // A URL scheme: a letter, then letters, digits, "+", "-" or ".", up to the first ":".
+    const size_t colon = target.find(':');
+    const bool scheme = colon != std::string::npos && colon > 0 && std::isalpha((unsigned char)target[0]) &&
+                        target.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789+-.") >= colon;
+    const std::string name = scheme ? target.substr(0, colon) : "";
+    if (scheme && name != "http" && name != "https")
+      fail("report: link '", label, "' = '", target, "': only relative links and http(s) URLs are allowed");
+  }
   fs::create_directories(out);
   std::string evals = "[";
   for (size_t i = 0; i < sources.evals.size(); ++i) {
@@ -298,8 +344,9 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
     scripts = three + "<script src=\"mesh.js\"></script>\n";
   }
   std::string links = "[";
-  for (const auto& [label, target] : sources.links)
+  for (const auto& [label, target] : sources.links) {
     links += (links.size() > 1 ? "," : "") + std::string("[") + js_string(label) + "," + js_string(target) + "]";
+  }
   data += ",links:" + links + "]}";
 
   write_assets(out);

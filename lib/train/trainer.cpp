@@ -9,6 +9,7 @@
 #include <functional>
 #include <numeric>
 #include <optional>
+#include <sstream>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
@@ -16,6 +17,7 @@
 #include "data/dataset.hpp"
 #include "data/sampler.hpp"
 #include "dist/communicator.hpp"
+#include "io/bytes.hpp"
 #include "metrics/lpips.hpp"
 #include "model/encoder.hpp"
 #include "pipeline/checkpoint.hpp"
@@ -31,6 +33,29 @@ namespace fs = std::filesystem;
 using pipeline::CheckpointState;
 
 namespace {
+
+// A resumed run continues from its checkpoint's step: rows a killed run logged after that
+// step are dropped from metrics.jsonl (the file is rewritten whole), so no step appears twice.
+void drop_rows_after(const fs::path& file, int64_t step) {
+  std::error_code ec;
+  if (!fs::exists(file, ec)) return;
+  std::istringstream in(io::detail::read_file(file));
+  std::string kept, line;
+  int64_t dropped = 0;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    const size_t at = line.find("\"step\": ");
+    if (at != std::string::npos && std::atoll(line.c_str() + at + 8) > step) {
+      ++dropped;
+      continue;
+    }
+    kept += line + "\n";
+  }
+  if (dropped == 0) return;
+  io::detail::write_file_atomic(file, kept);
+  spdlog::info("resume: dropped {} row(s) of {} logged after step {}, the checkpoint's", dropped,
+               file.filename().string(), step);
+}
 
 // Data parallelism: every rank starts from rank 0's state (fresh or resumed), sent as the bytes of
 // a checkpoint, so no rank needs the run directory.
@@ -169,6 +194,7 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
                  comm_->backend());
   }
 
+  if (lead_ && options.resume) drop_rows_after(run_ / "metrics.jsonl", st_.step);
   if (lead_) metrics_log_.emplace(run_ / "metrics.jsonl");
   const int64_t total_steps = int64_t(tc_.epochs) * tc_.iters_per_epoch;
   stop_step_ = options.max_steps >= 0 ? std::min(options.max_steps, total_steps) : total_steps;

@@ -311,3 +311,81 @@ TEST_CASE("a hung rank makes the other exit with an error within the timeout", "
   CHECK_THAT(log, Catch::Contains("died or hung"));
   CHECK_THAT(log, Catch::Contains("train.dist_timeout_s = " + std::to_string(int(timeout))));
 }
+
+namespace {
+
+// The children of `parent` (from /proc), and whether a process is still running (a zombie is not).
+std::vector<pid_t> children_of(pid_t parent) {
+  std::vector<pid_t> out;
+  for (const auto& e : fs::directory_iterator("/proc")) {
+    const std::string name = e.path().filename().string();
+    if (name.find_first_not_of("0123456789") != std::string::npos) continue;
+    std::ifstream stat(e.path() / "stat");
+    std::string line;
+    if (!std::getline(stat, line)) continue;
+    // pid (comm) state ppid ...: comm may hold spaces, so read after its closing parenthesis.
+    std::istringstream rest(line.substr(line.rfind(')') + 1));
+    char state = 0;
+    pid_t ppid = 0;
+    if (rest >> state >> ppid && ppid == parent) out.push_back(pid_t(std::stol(name)));
+  }
+  return out;
+}
+
+bool running(pid_t pid) {
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string line;
+  if (!std::getline(stat, line)) return false;
+  std::istringstream rest(line.substr(line.rfind(')') + 1));
+  char state = 0;
+  rest >> state;
+  return state != 'Z' && state != 'X';
+}
+
+bool all_gone(const std::vector<pid_t>& pids, double seconds) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < deadline) {
+    bool any = false;
+    for (pid_t p : pids) any = any || running(p);
+    if (!any) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return false;
+}
+
+}  // namespace
+
+TEST_CASE("a stop signal to the --nproc launcher reaches every rank, and ranks die with a killed launcher",
+          "[dist][slow]") {
+  for (const int sig : {SIGTERM, SIGKILL}) {
+    CAPTURE(sig);
+    const fs::path dir = th::test::scratch_dir("dist_launcher_signal_" + std::to_string(sig));
+    const auto args = train_command(dir / "run", {"--nproc", "2"}, tiny_overrides({"train.epochs=1000"}));
+    const Process launcher = th::test::spawn(args, {}, dir / "launcher.log");
+    const bool training = wait_for_file(dir / "run" / "metrics.jsonl", launcher, 120);
+    const auto ranks = children_of(launcher.pid);
+    INFO(th::test::read_text(dir / "launcher.log"));
+    if (!training || ranks.size() != 2) {
+      for (pid_t p : ranks) ::kill(p, SIGKILL);
+      th::test::kill_and_reap(launcher);
+    }
+    REQUIRE(training);
+    REQUIRE(ranks.size() == 2);
+    ::kill(launcher.pid, sig);
+    const auto status = th::test::wait_for(launcher, 60);
+    if (!status) th::test::kill_and_reap(launcher);
+    REQUIRE(status.has_value());
+    const bool gone = all_gone(ranks, 30);
+    if (!gone)
+      for (pid_t p : ranks) ::kill(p, SIGKILL);
+    CHECK(gone);
+    if (sig == SIGTERM) {
+      // The launcher waited for its ranks and says why it stopped.
+      CHECK(describe(*status) == "exit " + std::to_string(128 + SIGTERM));
+      CHECK_THAT(th::test::read_text(dir / "launcher.log"),
+                 Catch::Contains("launcher: Terminated: passing it to the 2 running rank(s) and waiting for them"));
+    } else {
+      CHECK(describe(*status) == "signal " + std::to_string(SIGKILL));
+    }
+  }
+}

@@ -17,6 +17,7 @@ and the viewer are left in --work/shots. Exits 77 (CTest's skip code) without Ch
 Standard library only.
 """
 import argparse
+import csv
 import glob
 import html.parser
 import json
@@ -27,6 +28,7 @@ import struct
 import subprocess
 import sys
 import time
+import urllib.parse
 import zlib
 
 SKIP = 77
@@ -206,15 +208,15 @@ def check_page(dom, folder, eval_dir, label):
     expected = {'images': str(summary['images']), 'psnr': f'{summary["psnr"]:.2f}', 'ssim': f'{summary["ssim"]:.3f}', 'lpips': lp}
     check({k: dom.cells.get(k) for k in expected} == expected,
           f'{label}: the scores table equals summary.json: {dom.cells} vs {expected}')
-    lines = open(os.path.join(eval_dir, 'per_image.csv')).read().strip().split('\n')[1:]
-    views = {f'{summary["setting"]}/{h}/{f}/{v}' for h, f, v, *_ in (l.split(',') for l in lines)}
+    lines = list(csv.reader(open(os.path.join(eval_dir, 'per_image.csv'), newline='')))[1:]
+    views = {f'{summary["setting"]}/{h}/{f}/{v}' for h, f, v, *_ in lines}
     check(len(dom.cards) == len(lines) == summary['images'] and {c['key'] for c in dom.cards} == views,
           f'{label}: the gallery holds every evaluated view ({len(dom.cards)} cards, {len(lines)} in per_image.csv)')
     psnrs = [c['psnr'] for c in dom.cards]
     check(psnrs == sorted(psnrs), f'{label}: the gallery starts with the worst PSNR')
-    check(all('src' in c and os.path.isfile(os.path.join(folder, c['src'])) for c in dom.cards),
+    check(all('src' in c and os.path.isfile(os.path.join(folder, urllib.parse.unquote(c['src']))) for c in dom.cards),
           f'{label}: every card shows its panel from inside the folder')
-    local = [r.split('?')[0].split('#')[0] for r in dom.refs]
+    local = [urllib.parse.unquote(r.split('?')[0].split('#')[0]) for r in dom.refs]
     outside = [r for r in local if r and (re.match(r'^[a-z]+:', r) or not os.path.exists(os.path.join(folder, r))
                                           or os.path.relpath(os.path.join(folder, r), folder).startswith('..'))]
     check(not outside, f'{label}: every link and image lies inside the folder {outside[:5]}')

@@ -55,7 +55,7 @@ TEST_CASE("an evaluation page embeds the outputs and refers to the panels where 
   CHECK(page == eval / "index.html");
   const std::string html = read_all(page);
   CHECK_THAT(html, Catch::Contains("\\\"psnr\\\": 21.5"));  // summary.json, as text
-  CHECK_THAT(html, Catch::Contains("\"images/CoreView_s03_f0002_v05.png\""));
+  CHECK_THAT(html, Catch::Contains("\"./images/CoreView_s03_f0002_v05.png\""));
   CHECK(html.find("</script><b>") == std::string::npos);  // the config cannot break out
   CHECK(fs::exists(eval / "report.js"));
   CHECK(fs::exists(eval / "report.css"));
@@ -82,7 +82,7 @@ TEST_CASE("a demo page copies what it shows into its folder", "[report]") {
   // The mesh as base64 (a file:// page may not fetch it): "ply\nfor" encodes to "cGx5CmZvcm".
   CHECK_THAT(read_all(out / "mesh.js"), Catch::Contains("\"cGx5CmZvcm"));
   const std::string html = read_all(out / "index.html");
-  CHECK_THAT(html, Catch::Contains("\"eval_identity/images/CoreView_s03_f0000_v03.png\""));
+  CHECK_THAT(html, Catch::Contains("\"./eval_identity/images/CoreView_s03_f0000_v03.png\""));
   CHECK(html.find(root.string()) == std::string::npos);  // nothing refers outside the folder
   // three.js comes with libjs-three, which scripts/install-deps.sh installs: its absence is a
   // broken set-up, not a case to skip.
@@ -90,6 +90,38 @@ TEST_CASE("a demo page copies what it shows into its folder", "[report]") {
   REQUIRE_FALSE(th::report::find_three_js().empty());
   CHECK(fs::exists(out / "three" / "three.min.js"));
   CHECK_THAT(html, Catch::Contains("<script src=\"three/PLYLoader.js\"></script>"));
+}
+
+TEST_CASE("folder names become safe relative links, and a link with a script scheme is refused", "[report]") {
+  const fs::path root = th::test::scratch_dir("report_names");
+  const fs::path eval = fake_eval(root / "javascript:alert(1);0");
+  th::report::PageSources sources;
+  sources.evals = {eval};
+  sources.links = {{"home", "https://example.org/th"}, {"runs", "../runs/"}};
+  const std::string html = read_all(th::report::write_page(sources, root / "page"));
+  CHECK_THAT(html, Catch::Contains("\"./javascript%3Aalert%281%29%3B0/images/CoreView_s03_f0000_v03.png\""));
+  // The name is shown as text; no link starts with it.
+  CHECK(html.find("\"javascript:alert(1);0/") == std::string::npos);
+  for (const char* bad : {"javascript:alert(1)", "JavaScript:alert(1)", "data:text/html,<b>", "vbscript:x"}) {
+    CAPTURE(bad);
+    sources.links = {{"x", bad}};
+    CHECK_THROWS_WITH(th::report::write_page(sources, root / "page2"),
+                      Catch::Contains(std::string("report: link 'x' = '") + bad +
+                                      "': only relative links and http(s) URLs are allowed"));
+  }
+  CHECK_FALSE(fs::exists(root / "page2"));  // refused before anything is written
+}
+
+TEST_CASE("a person's name with a comma and quotes survives per_image.csv (RFC 4180 quoting)", "[report]") {
+  const fs::path eval = fake_eval(th::test::scratch_dir("report_csv") / "eval");
+  write(eval / "per_image.csv",
+        "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n"
+        "\"Core,\"\"View\"\"\",0,3,20.000000,0.600000,n/a,0.5,10,1\n");
+  write(eval / "images" / "Core,\"View\"_f0000_v03.png", "png");
+  th::report::PageSources sources;
+  sources.evals = {eval};
+  const std::string html = read_all(th::report::write_page(sources, eval));
+  CHECK_THAT(html, Catch::Contains("\"./images/Core%2C%22View%22_f0000_v03.png\""));
 }
 
 TEST_CASE("a missing summary.json is an error naming the file", "[report]") {
@@ -111,6 +143,6 @@ TEST_CASE("an ablation page holds every row and links each row's own page", "[re
   const std::string html = read_all(page);
   CHECK_THAT(html, Catch::Contains("name:\"full\""));
   CHECK_THAT(html, Catch::Contains("name:\"fdi_wo_h\""));
-  CHECK_THAT(html, Catch::Contains("page:\"full/eval_identity/index.html\""));
+  CHECK_THAT(html, Catch::Contains("page:\"./full/eval_identity/index.html\""));
   CHECK_THAT(html, Catch::Contains("train_seconds:null"));
 }

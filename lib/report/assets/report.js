@@ -27,13 +27,35 @@
   const fmt = (v, digits) => (finite(v) ? v.toFixed(digits) : 'n/a');
   const signed = (v, digits) => (finite(v) ? (v > 0 ? '+' : '') + v.toFixed(digits) : 'n/a');
 
+  // One CSV line's fields (RFC 4180: a quoted field may hold commas and doubled quotes).
+  function csvFields(line) {
+    const out = [];
+    for (let i = 0; i <= line.length; ) {
+      if (line[i] === '"') {
+        let v = '';
+        for (i++; i < line.length; ) {
+          if (line[i] !== '"') v += line[i++];
+          else if (line[i + 1] === '"') (v += '"'), (i += 2);
+          else { i++; break; }
+        }
+        out.push(v);
+        i++;  // the comma after the closing quote
+      } else {
+        const end = line.indexOf(',', i) < 0 ? line.length : line.indexOf(',', i);
+        out.push(line.slice(i, end));
+        i = end + 1;
+      }
+    }
+    return out;
+  }
+
   // per_image.csv as objects; numeric fields as numbers, "n/a" as null.
   function parseCsv(text) {
     const lines = text.trim().split('\n');
-    const keys = lines[0].split(',');
+    const keys = csvFields(lines[0]);
     return lines.slice(1).map((line) => {
       const row = {};
-      line.split(',').forEach((v, i) => {
+      csvFields(line).forEach((v, i) => {
         row[keys[i]] = keys[i] === 'human' ? v : v === 'n/a' ? null : Number(v);
       });
       return row;
