@@ -5,6 +5,8 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <algorithm>
+
 #include "core/error.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
@@ -45,6 +47,21 @@ struct OneDnnLinear : torch::autograd::Function<OneDnnLinear> {
 };
 
 }  // namespace
+
+bool onednn_products_agree() {
+  static const bool agree = [] {
+    if (!at::hasMKLDNN()) return false;
+    torch::NoGradGuard no_grad;
+    // Fixed values (the global generator is not touched): 300 rows, 64 -> 96, with a bias.
+    const auto x = ((torch::arange(300 * 64) % 17) - 8).to(torch::kFloat).div(8).reshape({300, 64});
+    const auto w = ((torch::arange(96 * 64) % 13) - 6).to(torch::kFloat).div(13).reshape({96, 64});
+    const auto b = torch::arange(96).to(torch::kFloat).div(96);
+    const auto ref = F::linear(x, w, b);
+    const double err = (onednn_product(x, w, b) - ref).abs().max().item<double>();
+    return err <= 1e-5 * std::max(1.0, ref.abs().max().item<double>());
+  }();
+  return agree;
+}
 
 torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b) const {
   if (bf16()) {
@@ -88,8 +105,12 @@ Products resolve_products(const std::string& precision, const std::string& fp32_
   const bool cpu = device.is_cpu();
   if (fp32_products == "onednn" && cpu && !at::hasMKLDNN())
     fail("fp32_products 'onednn': the linked LibTorch is built without oneDNN (use auto or blas)");
+  if (fp32_products == "onednn" && cpu && !onednn_products_agree())
+    fail("fp32_products 'onednn': this LibTorch's oneDNN product (mkldnn_linear) disagrees with BLAS on a ",
+         "probe product (use auto or blas)");
   Products p;
-  p.onednn = cpu && fp32_products != "blas" && at::hasMKLDNN();
+  p.onednn = cpu && fp32_products != "blas" && at::hasMKLDNN() && onednn_products_agree();
+  const bool onednn_refused = cpu && fp32_products == "auto" && at::hasMKLDNN() && !p.onednn;
   const auto bf16 = runtime::detect_cpu_bf16();
   std::string reason;
   if (precision == "fp32") {
@@ -108,7 +129,9 @@ Products resolve_products(const std::string& precision, const std::string& fp32_
   } else {
     reason = "precision: auto -> fp32: the processor has " + bf16.describe() + ", no native bf16 dot products";
   }
-  if (why) *why = reason + " | " + p.describe();
+  if (why)
+    *why = reason + " | " + p.describe() +
+           (onednn_refused ? " (oneDNN's mkldnn_linear disagrees with BLAS on a probe product in this LibTorch)" : "");
   return p;
 }
 

@@ -54,6 +54,11 @@ struct Products {
   std::string describe() const;
 };
 
+// Whether this LibTorch's oneDNN fp32 product (mkldnn_linear) agrees with BLAS on a fixed probe
+// product, to 1e-5 relative; checked once per process. Debian 13's LibTorch 2.6 gives wrong
+// results there, so `fp32_products: auto` takes BLAS and `onednn` is refused.
+bool onednn_products_agree();
+
 // The products for the config's `precision` (fp32 | bf16 | auto) and `fp32_products`
 // (auto | onednn | blas) on `device`. auto takes bf16 where the processor executes bf16 dot
 // products natively (AVX512-BF16 or AMX, runtime::detect_cpu_bf16) or on a CUDA device with
