@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Hostile input, reproduced (issue 13): crafts every bad file and request of the issue itself,
+# Hostile input, reproduced: crafts every bad file and request it checks by itself,
 # runs the executables on it and checks the exit code (2: a user error) and the one stderr line
 # naming the file, key or value. Prints a Markdown table of the cases and their outcomes.
 #

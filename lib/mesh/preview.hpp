@@ -1,6 +1,6 @@
 #pragma once
 // A shaded preview image of a mesh, rendered with the project's rasteriser (render/raster.hpp),
-// for looking at a reconstruction without a 3D viewer (issue 7: the mesh preview PNG).
+// for looking at a reconstruction without a 3D viewer (the mesh preview PNG).
 //
 // Shading: per-pixel interpolated vertex normals, a headlight plus a key light from the upper
 // left, Lambertian, one-sided: back faces (an inside-out mesh) render dark, so a wrongly oriented

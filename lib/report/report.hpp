@@ -1,5 +1,5 @@
 #pragma once
-// The HTML report (issue 17): one page per evaluation, per demo and per ablation run that opens
+// The HTML report: one page per evaluation, per demo and per ablation run that opens
 // from its folder in a browser (file://, no server, no network) and can be zipped and mailed.
 //
 // The page (index.html) embeds its data (summary.json, per_image.csv, metrics.jsonl and

@@ -1,6 +1,6 @@
 #pragma once
 // A contact sheet: a grid of thumbnails of video frames (or mesh previews), labelled, for
-// looking at a whole video in one PNG (issue 7: in the run folder).
+// looking at a whole video in one PNG (in the run folder).
 
 #include <filesystem>
 #include <opencv2/core.hpp>

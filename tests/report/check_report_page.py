@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The demo-style report page of a tiny run, opened in headless Chromium (issue 17).
+"""The demo-style report page of a tiny run, opened in headless Chromium.
 
 Trains the tiny test config for a few steps, evaluates a few views, renders a short orbit,
 extracts a coloured mesh, writes the page with `transhuman-report page` as scripts/demo.sh does,

@@ -1,4 +1,4 @@
-// The rendering shortcuts of issue 15 against the exact render, on the tiny network trained
+// The rendering shortcuts against the exact render, on the tiny network trained
 // until it has surfaces (CTest fixture `trained_tiny`, tests/configs/tiny_surface.yaml): a random
 // field has no surface to stop at, so these checks need a trained one.
 #include <catch2/catch.hpp>

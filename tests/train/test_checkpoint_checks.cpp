@@ -1,4 +1,4 @@
-// Checkpoints are read without trusting them (issue 13): records, views, values, names, shapes
+// Checkpoints are read without trusting them: records, views, values, names, shapes
 // and the model settings they were trained with.
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
