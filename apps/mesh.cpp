@@ -31,8 +31,13 @@ int main(int argc, char** argv) {
 
     const auto ctx = th::app::start_run(options, "transhuman-mesh", "runs/mesh");
     th::app::print_summary(ctx, options.dry_run, model.checkpoint);
-    if (options.dry_run) return 0;
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
+    if (options.dry_run) {  // the request too: person, frame, view, grid and its memory
+      const auto plan = th::inference::plan_mesh(session, request);
+      spdlog::info("dry run: a {} x {} x {} grid over {} frame {}", plan.grid[0], plan.grid[1], plan.grid[2],
+                   session.human(plan.human).name(), plan.frame);
+      return 0;
+    }
     const auto s = th::inference::extract_mesh(session, request, ctx.run_dir);
     spdlog::info("mesh {} ({} vertices, {} faces), preview {}", s.ply.string(), s.mesh.num_verts(),
                  s.mesh.num_faces(), s.preview.string());

@@ -48,8 +48,13 @@ int main(int argc, char** argv) {
 
     const auto ctx = th::app::start_run(options, "transhuman-render", "runs/render");
     th::app::print_summary(ctx, options.dry_run, model.checkpoint);
-    if (options.dry_run) return 0;
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
+    if (options.dry_run) {  // the request too: person, frames, cameras, path file, memory
+      const auto plan = th::inference::plan_video(session, request);
+      spdlog::info("dry run: a video of {} frames of {} ({} body frame{}), {}x{}", plan.count, plan.human_name,
+                   plan.frames.size(), plan.frames.size() > 1 ? "s" : "", plan.width, plan.height);
+      return 0;
+    }
     const auto s = th::inference::render_video(session, request, ctx.run_dir);
     spdlog::info("{} frames ({} rendered, {} resumed), {:.2f} s/frame, in {}", s.frames, s.rendered,
                  s.skipped, s.seconds_per_frame, s.frames_dir.string());

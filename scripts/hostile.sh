@@ -211,7 +211,7 @@ check "evaluated with model.dparf.nk=2 and eval.model_mismatch=warn" 0 \
   eval.model_mismatch=warn eval.limit=1
 
 # ---- 4. resources are checked before work starts --------------------------------------------------
-check "--threads 100000" 2 "--threads: Value 100000 not in range 0 to 4096" "$apps/transhuman-render" --threads 100000
+check "--threads 100000" 2 "--threads: must be in [0, 4096], not 100000" "$apps/transhuman-render" --threads 100000
 check "threads: 100000 in the config" 2 "config key 'threads' = 100000: must be in [0, 4096] (0: one per core)" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run threads=100000
 check "mesh --voxel 1e-4 (a 10^11-point grid)" 2 "estimated peak memory" \
@@ -250,7 +250,7 @@ check "a folder given as config" 2 "is a folder" "$apps/transhuman-train" --dry-
 check "--dry-run when the data cannot be loaded" 2 "$work/nowhere" \
   "$apps/transhuman-train" "${tiny[@]}" --dry-run data.root="$work/nowhere" data.split_file="$data/split.yaml"
 check "unknown flag" 2 "The following argument was not expected: --bogus" "$apps/transhuman-eval" --bogus
-check "value out of range (was a 300-digit CLI11 range)" 2 "--threads: Value -5 not in range 0 to 4096" "$apps/transhuman-train" --threads -5
+check "value out of range (was a 300-digit CLI11 range)" 2 "--threads: must be in [0, 4096], not -5" "$apps/transhuman-train" --threads -5
 
 # ---- 7. images -----------------------------------------------------------------------------------
 d=$(copy truncated_jpeg)
@@ -343,8 +343,8 @@ if [[ -e "$work/no_cuda" ]]; then ok=FAIL; failures=$((failures + 1)); else ok=o
 rows+=("| ... no run folder written by the refused runs | - | - | - | | $ok |")
 
 # ---- 5a. calibration that cannot be right -----------------------------------------------------------
-# annots D KIND: KIND metres (every T given in metres), focal (camera 0's fx = 0), rotation (camera
-# 0's R doubled).
+# annots D KIND: KIND metres (every T given in metres), focal (camera 0's fx = 0), singular (the
+# target camera 3's K with last row 0), rotation (camera 0's R doubled).
 annots() {
   "$py" - "$1/$person/annots.npy" "$2" <<'EOF'
 import sys, numpy as np
@@ -354,6 +354,8 @@ if sys.argv[2] == 'metres':
     c['T'] = [np.asarray(t) / 1000.0 for t in c['T']]
 elif sys.argv[2] == 'focal':
     c['K'][0] = np.array(c['K'][0], dtype=float); c['K'][0][0][0] = 0.0
+elif sys.argv[2] == 'singular':
+    c['K'][3] = np.array(c['K'][3], dtype=float); c['K'][3][2] = 0.0
 else:
     c['R'][0] = np.array(c['R'][0], dtype=float) * 2
 np.save(sys.argv[1], a)
@@ -367,6 +369,11 @@ check "... with data.calibration_check=warn" 0 "annots.npy': reference camera &&
 d=$(copy calib_focal) && annots "$d" focal
 check "a camera with focal length 0" 2 "$d/$person/annots.npy': camera 0: K has focal lengths fx = 0" \
   "${evaluate[@]}" $(on "$d") --out "$work/e_focal"
+d=$(copy calib_singular) && annots "$d" singular
+check "a singular K (the target camera's last row 0)" 2 "$d/$person/annots.npy': camera 3: K is not an intrinsic matrix (" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_singular"
+check "... also with data.calibration_check=warn" 2 "$d/$person/annots.npy': camera 3: K is not an intrinsic matrix (" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_singular_warn" data.calibration_check=warn
 d=$(copy calib_rotation) && annots "$d" rotation
 check "a camera whose R is not a rotation" 2 "$d/$person/annots.npy': camera 0: R is not a rotation (" \
   "${evaluate[@]}" $(on "$d") --out "$work/e_rotation"
@@ -409,6 +416,60 @@ d=$(copy fifo_annots)
 rm "$d/$person/annots.npy" && mkfifo "$d/$person/annots.npy"
 check "a FIFO in place of annots.npy" 2 "annotations '$d/$person/annots.npy' is a FIFO (named pipe), not a file" \
   "${evaluate[@]}" $(on "$d") --out "$work/e_fifo_annots"
+
+# ---- 9. paths the system refuses, images too small, report inputs, dry runs that check all -------
+ln -s loop "$work/loop"
+check "a symlink loop in --out" 2 "'$work/loop/e': Too many levels of symbolic links" \
+  "${evaluate[@]}" $(on "$data") --out "$work/loop/e"
+check "a symlink loop in --checkpoint" 2 "cannot use '$work/loop/x.pt': Too many levels of symbolic links" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/loop/x.pt" --out "$work/e_loop"
+check "a symlink loop as data.root" 2 "cannot use '$work/loop/smpl_model.npz': Too many levels of symbolic links" \
+  "${evaluate[@]}" $(on "$work/loop") --out "$work/e_loop_data"
+long=$(printf 'x%.0s' $(seq 300))
+check "an --out whose name is too long" 2 "$long' && File name too long" \
+  "${evaluate[@]}" $(on "$data") --out "$work/$long"
+d=$(copy one_pixel)
+"$py" - "$d/$person/Camera_B1/000000.jpg" <<'EOF2'
+import sys, numpy as np, cv2
+cv2.imwrite(sys.argv[1], np.full((1, 1, 3), 128, np.uint8))
+EOF2
+check "a 1x1 image" 2 "image '$d/$person/Camera_B1/000000.jpg' is 1x1 pixels; at data.ratio" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_one_pixel"
+d=$(copy body_away)
+"$py" - "$d" <<'EOF2'
+import sys, glob, numpy as np
+for f in glob.glob(sys.argv[1] + '/*/new_vertices/*.npy'):
+    v = np.load(f); v[:, 0] += 50.0; np.save(f, v)
+for f in glob.glob(sys.argv[1] + '/*/new_params/*.npy'):
+    p = np.load(f, allow_pickle=True).item(); p['Th'] = np.asarray(p['Th']) + np.array([[50.0, 0, 0]]); np.save(f, p)
+EOF2
+check "training with the body out of every view (calibration_check=warn)" 2 "error: sample 'CoreView_ && , target view && : the body's box is outside the image, no training patch can be sampled" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$d") --out "$work/t_away" --max-steps 1 data.calibration_check=warn
+"${evaluate[@]}" $(on "$data") --out "$work/e_good" >/dev/null 2>&1 || echo "hostile: the tiny evaluation failed" >&2
+cp -r "$work/e_good" "$work/e_badjson"
+printf '{"setting": "identity", "psnr": 20.' >"$work/e_badjson/summary.json"
+check "report of a cut-short summary.json" 2 "evaluation summary '$work/e_badjson/summary.json' is not JSON" \
+  "$apps/transhuman-report" page --out "$work/rep_badjson" --eval "$work/e_badjson"
+cp -r "$work/e_good" "$work/e_other"
+page_sum=$(sum_of "$work/e_other/index.html")
+check "report --out <another evaluation's folder>" 2 "'$work/e_other' is another evaluation's folder" \
+  "$apps/transhuman-report" page --out "$work/e_other" --eval "$work/e_good"
+mkdir -p "$work/site" && echo '<html>my own page</html>' >"$work/site/index.html"
+check "report --out <a folder with someone else's index.html>" 2 "'$work/site/index.html' exists and was not written by TransHuman" \
+  "$apps/transhuman-report" page --out "$work/site" --eval "$work/e_good"
+if [[ $(sum_of "$work/e_other/index.html") == "$page_sum" && $(cat "$work/site/index.html") == '<html>my own page</html>' ]]; then
+  ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+rows+=("| ... both pages unchanged | - | - | - | | $ok |")
+check_ok "report of an evaluation into its own folder" \
+  "$apps/transhuman-report" page --out "$work/e_good" --eval "$work/e_good"
+check "render --dry-run --human <nobody>" 2 "nobody" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --human nobody
+check "render --dry-run --camera 99" 2 "camera 99 out of range" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --camera 99
+check "render --dry-run --path <missing>" 2 "camera path file '$work/missing.yaml' does not exist" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --path "$work/missing.yaml"
+check "mesh --dry-run --view 99" 2 "camera 99 out of range" \
+  "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --view 99
 
 table=$(
   echo "| case | expected exit | exit | seconds | last stderr line | |"

@@ -28,7 +28,7 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
   cli.add_option("--device", o.device, "compute device (overrides the config's 'device')")
       ->check(CLI::IsMember({"auto", "cpu", "cuda"}));
   cli.add_option("--threads", o.threads, "CPU threads for LibTorch (0: one per core)")
-      ->check(CLI::Range(0, 4096).description("0 to 4096"));
+      ->check(in_range(0, 4096));
   cli.add_flag("--dry-run", o.dry_run, "build everything the config names, print a summary, exit");
   cli.add_flag("-v,--verbose", o.verbose, "debug logging");
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
@@ -65,6 +65,10 @@ CLI::Validator finite_number() {
 }
 CLI::Validator at_least(double min) {
   return number_check([min](double v) { return v >= min; }, ">= " + CLI::detail::to_string(min));
+}
+CLI::Validator in_range(double min, double max) {
+  return number_check([min, max](double v) { return v >= min && v <= max; },
+                      "in [" + CLI::detail::to_string(min) + ", " + CLI::detail::to_string(max) + "]");
 }
 CLI::Validator above(double bound) {
   return number_check([bound](double v) { return v > bound; }, "> " + CLI::detail::to_string(bound));
@@ -282,6 +286,15 @@ int guarded_main(const std::string& app_name, const std::function<int()>& body) 
   } catch (const Error& e) {
     std::cerr << app_name << ": error: " << e.what() << std::endl;
     logging::error_to_files(std::string("error: ") + e.what());
+    return 2;
+  } catch (const fs::filesystem_error& e) {
+    // A path the user gave that cannot be used (a symlink loop, no permission, a name too
+    // long): a user error, named by path and reason.
+    std::string message = "cannot use '" + e.path1().string() + "'";
+    if (!e.path2().empty()) message += " or '" + e.path2().string() + "'";
+    message += ": " + e.code().message();
+    std::cerr << app_name << ": error: " << message << std::endl;
+    logging::error_to_files("error: " + message);
     return 2;
   } catch (const c10::Error& e) {
     std::cerr << app_name << ": internal error: " << e.what_without_backtrace() << std::endl;

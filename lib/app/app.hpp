@@ -52,6 +52,8 @@ CLI::Validator finite_number();
 // A CLI11 check: the value is a number >= `min` (the message quotes the bound, not a range).
 CLI::Validator at_least(double min);
 CLI::Validator above(double bound);  // a number > bound
+// A number in [min, max] (CLI11's own Range words its message differently across versions).
+CLI::Validator in_range(double min, double max);
 
 // Registers --force on `cli` (with `help`, or the default text) and turns on the --out guard.
 void add_force_option(CLI::App& cli, CommonOptions& options, const std::string& help = "");

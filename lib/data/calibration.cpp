@@ -7,12 +7,21 @@
 
 namespace th::data {
 
-std::string implausible_camera(const torch::Tensor& K, const torch::Tensor& R) {
+std::string unusable_intrinsics(const torch::Tensor& K) {
   const auto k = K.to(torch::kFloat64).contiguous();
-  const auto r = R.to(torch::kFloat64).contiguous();
   const double* a = k.data_ptr<double>();
   if (!(std::isfinite(a[0]) && a[0] > 0 && std::isfinite(a[4]) && a[4] > 0))
     return fmt::format("K has focal lengths fx = {}, fy = {} (both must be positive)", a[0], a[4]);
+  // With its last row (0, 0, 1) and K[1][0] = 0, K is upper triangular: invertible.
+  if (!(std::abs(a[3]) <= 1e-9 && std::abs(a[6]) <= 1e-9 && std::abs(a[7]) <= 1e-9 && std::abs(a[8] - 1) <= 1e-9) ||
+      !std::isfinite(a[1]) || !std::isfinite(a[2]) || !std::isfinite(a[5]))
+    return fmt::format("K is not an intrinsic matrix (rows [{} {} {}] [{} {} {}] [{} {} {}]; expected [fx s cx] "
+                       "[0 fy cy] [0 0 1])", a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8]);
+  return "";
+}
+
+std::string implausible_rotation(const torch::Tensor& R) {
+  const auto r = R.to(torch::kFloat64).contiguous();
   const double off = (torch::mm(r, r.t()) - torch::eye(3, torch::kFloat64)).abs().max().item<double>();
   const double det = torch::det(r).item<double>();
   if (!(off <= CalibrationLimits::kRotation) || !(std::abs(det - 1) <= CalibrationLimits::kRotation))

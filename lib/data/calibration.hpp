@@ -17,9 +17,13 @@ struct CalibrationLimits {
   static constexpr double kMinInImage = 0.5;       // fraction of the body's vertices in a reference image
 };
 
-// Why camera `K` (3, 3) and `R` (3, 3) cannot be right, or "" when they can: focal lengths
-// positive and finite, R orthonormal with det +1 within kRotation.
-std::string implausible_camera(const torch::Tensor& K, const torch::Tensor& R);
+// Why intrinsics `K` (3, 3) cannot be used, or "" when they can: focal lengths positive and
+// finite, K upper triangular with last row (0, 0, 1), so invertible. Always an error: no ray
+// can be cast through such a camera.
+std::string unusable_intrinsics(const torch::Tensor& K);
+
+// Why `R` (3, 3) is not a rotation, or "" when it is: orthonormal with det +1 within kRotation.
+std::string implausible_rotation(const torch::Tensor& R);
 
 // Why the body `vertices` (N, 3), in world metres, cannot be seen as it should by a reference
 // camera (K, R, T (3, 1)) of a `width` x `height` image, or "": its centre between kMinDistance

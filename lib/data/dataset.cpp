@@ -77,11 +77,12 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
     const int h = int(humans_.size());
     for (int c = 0; c < human->num_cameras(); ++c) {
       const auto& cam = human->camera(c);
-      const std::string why = implausible_camera(cam.K, cam.R);
+      const std::string where = "'" + (human->dir() / "annots.npy").string() + "': camera " + std::to_string(c) + ": ";
+      const std::string unusable = unusable_intrinsics(cam.K);
+      if (!unusable.empty()) fail(where, unusable);
+      const std::string why = implausible_rotation(cam.R);
       if (!why.empty())
-        implausible(config.calibration_check,
-                    "'" + (human->dir() / "annots.npy").string() + "': camera " + std::to_string(c) + ": " + why,
-                    human->dir().string() + "#K" + std::to_string(c));
+        implausible(config.calibration_check, where + why, human->dir().string() + "#R" + std::to_string(c));
     }
     auto check_view = [&](int v, const char* what) {
       if (v < 0 || v >= human->num_cameras())
@@ -215,6 +216,10 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     // edge values included, as the reference's `msk * bound_mask > 0` [parity].
     const cv::Mat person = (target.mask != 0) & (bmask != 0);
     const auto& p = config_.patch;
+    if (cv::countNonZero(bmask) == 0)
+      fail("sample '", human.name(), "' frame ", it.frame, ", target view ", s.target_view,
+           ": the body's box is outside the image, no training patch can be sampled (is the body in that view? "
+           "check the calibration in '", (human.dir() / "annots.npy").string(), "')");
     const auto patches = sample_patches(person / 255, bmask, p.count, p.size, p.body_prob, rng);
     s.patch_rgb = torch::zeros({int64_t(patches.size()), 3, p.size, p.size}, torch::kFloat32);
     std::vector<torch::Tensor> px, slot;

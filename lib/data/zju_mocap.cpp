@@ -272,6 +272,13 @@ fs::path visibility_file(const fs::path& root, const HumanSequence& human, int f
 ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOptions& o) {
   const fs::path path = human.image_path(frame, cam);
   cv::Mat bgr = read_image(path, cv::IMREAD_COLOR);
+  // Smaller images leave the encoder's last stage (stride 32) without a pixel to look at.
+  constexpr int kMinSide = 8;
+  const cv::Size size(int(bgr.cols * o.ratio), int(bgr.rows * o.ratio));
+  if (size.width < kMinSide || size.height < kMinSide)
+    fail("image '", path.string(), "' is ", bgr.cols, "x", bgr.rows, " pixels; at data.ratio ",
+         o.ratio, " it would be ", size.width, "x", size.height, ", below the ", kMinSide, "x",
+         kMinSide, " the network needs");
   cv::Mat rgb;
   cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
   rgb = to_unit_float(rgb);
@@ -300,7 +307,6 @@ ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOp
   if (o.border_band && !o.band_before_undistort) mark_band(und_mask);
 
   ViewImage view;
-  const cv::Size size(int(rgb.cols * o.ratio), int(rgb.rows * o.ratio));
   if (size != rgb.size()) {
     cv::resize(und_rgb, view.rgb, size, 0, 0, cv::INTER_AREA);
     cv::resize(und_mask, view.mask, size, 0, 0, cv::INTER_NEAREST);

@@ -83,7 +83,7 @@ std::string describe(const VideoRequest& r, const std::string& checkpoint, const
 
 }  // namespace
 
-VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir) {
+VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   const int h = session.find_human(request.human);
   const auto& human = session.human(h);
   std::vector<int> frames = request.frames;
@@ -147,6 +147,27 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
 
   // What it costs, refused before anything is written when it cannot fit.
   resources::check(session.render_estimate(prepared, width, height, count), session.config().max_memory_gb);
+  VideoPlan plan;
+  plan.human = h;
+  plan.human_name = human.name();
+  plan.frames = std::move(frames);
+  plan.base_view = base_view;
+  plan.width = width;
+  plan.height = height;
+  plan.count = count;
+  plan.shots = std::move(shots);
+  plan.prepared = std::move(prepared);
+  return plan;
+}
+
+VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir) {
+  VideoPlan plan = plan_video(session, request);
+  const int h = plan.human, base_view = plan.base_view, width = plan.width, height = plan.height,
+            count = plan.count;
+  const auto& frames = plan.frames;
+  const auto& shots = plan.shots;
+  const auto& human = session.human(h);
+  PreparedFrame& prepared = plan.prepared;
 
   // Resume only what the same request wrote.
   fs::create_directories(out_dir);

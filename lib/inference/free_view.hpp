@@ -39,6 +39,22 @@ struct VideoSummary {
   std::filesystem::path contact_sheet;  // empty when not made
 };
 
+// A request resolved and checked against the data: everything render_video needs before it
+// writes anything (also what `transhuman-render --dry-run` checks).
+struct VideoPlan {
+  int human = 0;                           // the session's person index
+  std::string human_name;
+  std::vector<int> frames;                 // body frames, cycled over the video
+  int base_view = 0;                       // the dataset camera the output image is modelled on
+  int width = 0, height = 0, count = 0;    // output size and video length
+  std::vector<video::PathCamera> shots;    // one camera per video frame
+  PreparedFrame prepared;                  // the first body frame, ready to render
+};
+
+// Resolves `request` (see render_video for what is refused) and checks the memory it needs
+// against max_memory_gb.
+VideoPlan plan_video(const Session& session, const VideoRequest& request);
+
 // Video frame k shows body frame frames[k % F] from camera cameras[k % C]; the video has
 // max(F, C) frames. The orbit looks at the centre of each frame's body box. Throws th::Error
 // for a bad request (unknown person, frame or camera out of range, unreadable path file, an

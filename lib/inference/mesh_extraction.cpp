@@ -50,29 +50,42 @@ resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest
 
 }  // namespace
 
-MeshSummary extract_mesh(const Session& session, const MeshRequest& request, const fs::path& out_dir) {
+MeshPlan plan_mesh(const Session& session, const MeshRequest& request) {
   if (!(request.voxel > 0) || !std::isfinite(request.voxel))
     fail("mesh voxel size must be a positive number, got ", request.voxel);
   if (!(request.threshold >= 0) || !std::isfinite(request.threshold))
     fail("mesh threshold must be a finite number >= 0, got ", request.threshold,
          " (the grid away from the body and its padding hold density 0: a negative level puts all of it inside)");
-  const int h = session.find_human(request.human);
-  const auto& human = session.human(h);
-  int frame = request.frame;
-  if (frame < 0) {
-    const auto listed = session.setting_frames(h);
+  MeshPlan plan;
+  plan.human = session.find_human(request.human);
+  const auto& human = session.human(plan.human);
+  plan.frame = request.frame;
+  if (plan.frame < 0) {
+    const auto listed = session.setting_frames(plan.human);
     if (listed.empty()) fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
-    frame = listed.front();
+    plan.frame = listed.front();
   }
   if (request.view < 0 || request.view >= human.num_cameras())
     fail(human.name(), ": camera ", request.view, " out of range [0, ", human.num_cameras(), ")");
-  const auto t0 = std::chrono::steady_clock::now();
-  const PreparedFrame prepared = session.prepare(h, frame, request.view);
+  plan.prepared = session.prepare(plan.human, plan.frame, request.view);
+  // What the grid costs is checked first (a too fine voxel is refused in a second, not after
+  // filling memory).
+  const auto bounds = plan.prepared.sample.body.bounds.to(torch::kFloat64).reshape({2, 3});
+  resources::check(mesh_estimate(bounds, request, session, plan.prepared), session.config().max_memory_gb);
+  const auto grid = mesh::grid_over_bounds(bounds, request.voxel);
+  plan.grid = {grid.width, grid.height, grid.depth};
+  return plan;
+}
 
-  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7); what it
-  // costs is checked first (a too fine voxel is refused in a second, not after filling memory).
+MeshSummary extract_mesh(const Session& session, const MeshRequest& request, const fs::path& out_dir) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const MeshPlan plan = plan_mesh(session, request);
+  const int frame = plan.frame;
+  const auto& human = session.human(plan.human);
+  const PreparedFrame& prepared = plan.prepared;
+
+  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7).
   const auto bounds = prepared.sample.body.bounds.to(torch::kFloat64).reshape({2, 3});
-  resources::check(mesh_estimate(bounds, request, session, prepared), session.config().max_memory_gb);
   const auto grid = mesh::grid_over_bounds(bounds, request.voxel);
   const int64_t plane = grid.height * grid.width;
   const int64_t slab = std::max<int64_t>(1, request.slab_points / std::max<int64_t>(1, plane));

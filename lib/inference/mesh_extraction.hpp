@@ -33,6 +33,17 @@ struct MeshSummary {
   std::filesystem::path ply, preview;
 };
 
+// A request resolved and checked against the data, before any density is evaluated (also what
+// `transhuman-mesh --dry-run` checks): voxel, threshold, person, frame, preview camera, and the
+// memory the grid needs against max_memory_gb.
+struct MeshPlan {
+  int human = 0;
+  int frame = 0;
+  PreparedFrame prepared;
+  std::array<int64_t, 3> grid{0, 0, 0};
+};
+MeshPlan plan_mesh(const Session& session, const MeshRequest& request);
+
 // Writes <out_dir>/<human>_frame<NNNN>.ply and <...>_preview.png. Throws th::Error for a bad
 // request; an empty mesh (nothing above the threshold) is an error that names the threshold
 // and the largest density found.

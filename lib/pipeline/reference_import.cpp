@@ -179,6 +179,9 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
     auto src = it->second;
     check_finite(src, source + ": tensor '" + ref + "'");
     if (src.dim() == 3 && src.size(2) == 1 && dst.dim() == 2) src = src.squeeze(2);  // Conv1d k=1
+    if (src.is_floating_point() != dst.is_floating_point() || src.scalar_type() == torch::kBool)
+      fail(source, ": key '", ref, "' holds ", c10::toString(src.scalar_type()), " values, the model expects ",
+           c10::toString(dst.scalar_type()), " (not a TransHuman reference checkpoint?)");
     if (src.sizes() != dst.sizes())
       fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ", dst.sizes(),
            config_keys_for(name).shape.empty() ? "" : " (decided by " + config_keys_for(name).shape + ")");
@@ -188,10 +191,21 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
   };
   for (auto& p : model.named_parameters()) visit(p.key(), p.value());
   for (auto& b : model.named_buffers()) visit(b.key(), b.value());
+  // What the reference holds but does not use (SPEC 8) is skipped; any other key means the file
+  // is not what it claims to be (another network or version), so nothing is copied.
+  static const char* const kUnused[] = {"encoder.model.layer3.", "encoder.model.layer4.", "encoder.model.fc.",
+                                        "ViT.cls_token", "ViT.mask_token", "xyzc_net.",
+                                        "encoder.PE_color.", "ViT.PE.", "PE_relative."};
+  for (const auto& [k, v] : state) {
+    if (used.count(k)) continue;
+    const bool known = std::any_of(std::begin(kUnused), std::end(kUnused),
+                                   [&](const char* prefix) { return k.rfind(prefix, 0) == 0; });
+    if (!known)
+      fail(source, ": key '", k, "' is not part of the TransHuman reference network (another model or version?)");
+    report.ignored.push_back(k);
+  }
   torch::NoGradGuard no_grad;
   for (auto& [dst, src] : copies) dst.copy_(src.to(dst.dtype()));
-  for (const auto& [k, v] : state)
-    if (!used.count(k)) report.ignored.push_back(k);
   return report;
 }
 

@@ -30,7 +30,7 @@ std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem
 
 struct ImportReport {
   std::vector<std::string> loaded;   // reference names copied into the model
-  std::vector<std::string> ignored;  // present in the file, unused by the model
+  std::vector<std::string> ignored;  // the reference's known unused parts present in the file
 };
 
 // The reference name of each model parameter/buffer (SPEC 8), e.g. "fdi.key0.weight" ->
@@ -38,7 +38,9 @@ struct ImportReport {
 std::string reference_name(const std::string& model_name);
 
 // Copies a reference state dict into the model. Throws th::Error naming the first missing or
-// mis-shaped key (and the source); nothing is modified then.
+// mis-shaped key, a key holding integers or booleans where the model has weights, or a key the
+// reference network does not have (its known unused parts, SPEC 8, are skipped), and the
+// source; nothing is modified then.
 ImportReport import_reference_state(model::TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source);
 ImportReport import_reference_checkpoint(model::TransHumanImpl& model, const std::filesystem::path& path);

@@ -1,6 +1,7 @@
 #include "report/report.hpp"
 
 #include <spdlog/spdlog.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cctype>
@@ -39,6 +40,54 @@ std::string read_text(const fs::path& path, const std::string& what) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+// An evaluation's summary.json, checked and written again as canonical JSON for the page: a
+// file the page's JSON.parse would reject (hand-edited, cut short) is refused here, by name,
+// rather than leaving a blank page. It must be a flat object holding at least the keys the page
+// reads; values are numbers, strings, booleans or null.
+std::string read_summary(const fs::path& eval) {
+  const fs::path path = eval / "summary.json";
+  const std::string text = read_text(path, "evaluation summary");
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    fail("report: evaluation summary '", path.string(), "' is not JSON (", e.msg, ", line ", e.mark.line + 1, ")");
+  }
+  if (!root.IsMap()) fail("report: evaluation summary '", path.string(), "' is not a JSON object");
+  for (const char* key : {"setting", "images", "psnr", "ssim", "lpips"})
+    if (!root[key]) fail("report: evaluation summary '", path.string(), "' has no '", key, "'");
+  std::string json = "{";
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    const YAML::Node& v = kv.second;
+    json += (json.size() > 1 ? ", " : "") + js_string(key) + ": ";
+    if (v.IsNull()) {
+      json += "null";
+      continue;
+    }
+    if (!v.IsScalar()) fail("report: evaluation summary '", path.string(), "': '", key, "' is not a single value");
+    const std::string value = v.Scalar();
+    if (v.Tag() == "!") {  // quoted: a string
+      json += js_string(value);
+      continue;
+    }
+    char* end = nullptr;
+    const double number = std::strtod(value.c_str(), &end);
+    if (!value.empty() && end == value.c_str() + value.size() && std::isfinite(number)) {
+      char buf[40];
+      std::snprintf(buf, sizeof buf, "%.17g", number);
+      json += buf;
+    } else if (value == "true" || value == "false") {
+      json += value;
+    } else {
+      json += js_string(value);
+    }
+  }
+  if (root["setting"].IsNull() || !root["setting"].IsScalar())
+    fail("report: evaluation summary '", path.string(), "': 'setting' must be a string");
+  return json + "}";
 }
 
 void write_text(const fs::path& path, const std::string& text) {
@@ -178,7 +227,7 @@ std::vector<CsvRow> csv_rows(const std::string& csv, const fs::path& file) {
 
 // One evaluation folder as a JavaScript object literal; its panels and files brought into `out`.
 std::string eval_js(const fs::path& eval, const fs::path& out, const std::string& copy_name) {
-  const std::string summary = read_text(eval / "summary.json", "evaluation summary");
+  const std::string summary = read_summary(eval);
   const std::string csv = read_text(eval / "per_image.csv", "per-image scores");
   std::string panels = "[";
   for (const CsvRow& r : csv_rows(csv, eval / "per_image.csv")) {
@@ -223,11 +272,36 @@ std::string bring_three_js(const fs::path& out) {
   return tags;
 }
 
+// Marks the pages this project writes: an index.html without it is someone else's and is never
+// replaced. An evaluation's own page (in its folder) carries the second mark too.
+const std::string kGenerator = "<meta name=\"generator\" content=\"transhuman-report\">";
+const std::string kEvaluationPage = "<meta name=\"th-page\" content=\"evaluation-folder\">";
+
+// Refuses an `out` whose index.html the page would wrongly replace: one this project did not
+// write, or another evaluation's own page (`out` is not one of `evals`).
+void check_page_folder(const fs::path& out, const std::vector<fs::path>& evals) {
+  const fs::path page = out / "index.html";
+  std::error_code ec;
+  if (!fs::exists(page, ec)) return;
+  const std::string old = read_text(page, "page");
+  if (old.find(kGenerator) == std::string::npos)
+    fail("report: '", page.string(), "' exists and was not written by TransHuman; choose another --out");
+  const bool shown = std::any_of(evals.begin(), evals.end(), [&](const fs::path& e) {
+    std::error_code eq;
+    return fs::equivalent(e, out, eq);
+  });
+  if (old.find(kEvaluationPage) != std::string::npos && !shown)
+    fail("report: '", out.string(), "' is another evaluation's folder; its page would be replaced: choose "
+         "another --out");
+}
+
 // The page around the data: errors are caught from the first script on, so a test (or a user)
 // sees every failure in the page itself (#th-errors) as well as in the console.
-std::string page_html(const std::string& title, const std::string& data_js, const std::string& scripts) {
+std::string page_html(const std::string& title, const std::string& data_js, const std::string& scripts,
+                      bool evaluation_folder = false) {
   return "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n<title>" +
+         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n" + kGenerator + "\n" +
+         (evaluation_folder ? kEvaluationPage + "\n" : std::string()) + "<title>" +
          html_escape(title) +
          "</title>\n<link rel=\"stylesheet\" href=\"report.css\">\n"
          "<script>\nwindow.TH_ERRORS = [];\n"
@@ -304,12 +378,16 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
     if (scheme && name != "http" && name != "https")
       fail("report: link '", label, "' = '", target, "': only relative links and http(s) URLs are allowed");
   }
+  check_page_folder(out, sources.evals);
   fs::create_directories(out);
   std::string evals = "[";
+  bool evaluation_folder = false;  // the page of the evaluation in `out` itself
   for (size_t i = 0; i < sources.evals.size(); ++i) {
     const fs::path& dir = sources.evals[i];
     if (!fs::is_directory(dir)) fail("report: no evaluation folder '", dir.string(), "'");
-    const std::string name = fs::equivalent(dir, out) ? "." : dir.filename().string();
+    const bool here = fs::equivalent(dir, out);
+    evaluation_folder = evaluation_folder || here;
+    const std::string name = here ? "." : dir.filename().string();
     evals += (i ? "," : "") + eval_js(dir, out, name);
   }
   evals += "]";
@@ -351,16 +429,17 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
 
   write_assets(out);
   const fs::path page = out / "index.html";
-  write_text(page, page_html(sources.title, data, scripts));
+  write_text(page, page_html(sources.title, data, scripts, evaluation_folder));
   return page;
 }
 
 fs::path write_ablation_page(const std::vector<AblationRow>& rows, const std::string& title, const fs::path& out) {
   if (rows.empty()) fail("report: no ablation rows to show");
+  check_page_folder(out, {});
   fs::create_directories(out);
   std::string list = "[";
   for (const AblationRow& row : rows) {
-    const std::string summary = read_text(row.eval / "summary.json", "evaluation summary");
+    const std::string summary = read_summary(row.eval);
     const std::string csv = read_text(row.eval / "per_image.csv", "per-image scores");
     char seconds[32];
     std::snprintf(seconds, sizeof seconds, "%.0f", row.train_seconds);

@@ -47,6 +47,14 @@ StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const 
           << sample.frame << ")";
       if (!distributed) fail(msg.str());
       stats.bad_loss = msg.str();
+    } else if (!loss.total.requires_grad()) {
+      // No sample point lay inside the body's box: the image has nothing to learn from.
+      std::ostringstream msg;
+      msg << "sample '" << sample.human << "' frame " << sample.frame << ", target view " << sample.target_view
+          << ": no ray of its patches meets the body's box at step " << where.step
+          << " (is the body inside that view? check its calibration and mask)";
+      if (!distributed) fail(msg.str());
+      stats.bad_loss = msg.str();
     } else {
       loss.total.backward();
     }
@@ -71,7 +79,7 @@ void synchronise_step(dist::Communicator* comm, StepStats& s, model::TransHumanI
                               "the step statistics");
   if (!s.bad_loss.empty()) fail(s.bad_loss);
   if (sums[5] > 0)
-    fail("the loss became non-finite on ", int(sums[5]), " other rank(s) at step ", where.step, " (epoch ",
+    fail("a sample failed (non-finite loss or no body in view) on ", int(sums[5]), " other rank(s) at step ", where.step, " (epoch ",
          where.epoch, "); see their error; last good checkpoint: ", last_good(where));
   s.loss = sums[0], s.mse = sums[1], s.lpips = sums[2], s.psnr = sums[3], s.rays = sums[4];
   comm->average_gradients(model.parameters(), world);

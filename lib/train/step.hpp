@@ -35,7 +35,7 @@ namespace th::train {
 // Sums over this process's samples (over all ranks after synchronise_step).
 struct StepStats {
   double loss = 0, mse = 0, lpips = 0, psnr = 0, rays = 0;
-  std::string bad_loss;  // the error of a non-finite loss on this process (data parallel)
+  std::string bad_loss;  // why this process's sample failed: a non-finite loss, or no body in view (data parallel)
 };
 
 // What a step reads besides the samples.

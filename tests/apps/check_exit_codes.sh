@@ -24,7 +24,7 @@ tiny=(data.root="$data" data.split_file="$data/split.yaml" model.grouping.cache_
 expect 2 "transhuman-train: error: The following argument was not expected: --bogus-flag" "$apps/transhuman-train" --bogus-flag
 expect 2 "--max-steps: 1 required" "$apps/transhuman-train" --max-steps
 expect 2 "transhuman-eval: error: --limit: 'notanumber' is not a number" "$apps/transhuman-eval" --limit notanumber
-expect 2 "--threads: Value 100000 not in range 0 to 4096" "$apps/transhuman-render" --threads 100000
+expect 2 "--threads: must be in [0, 4096], not 100000" "$apps/transhuman-render" --threads 100000
 expect 2 "transhuman-mesh: error: The following argument was not expected: --no-such-option" "$apps/transhuman-mesh" --no-such-option
 expect 2 "transhuman-synth: error: --out is required" "$apps/transhuman-synth"
 expect 2 "unknown config key 'model.dparf.nkk' (did you mean 'model.dparf.nk'?)" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1

@@ -17,7 +17,8 @@ namespace {
 void write_annots(const fs::path& root, const std::string& name, int frames, int cameras) {
   Value::List K, R, T, D, ims;
   for (int c = 0; c < cameras; ++c) {
-    K.push_back(Value::array(torch::eye(3, torch::kFloat64) * 500));
+    K.push_back(Value::array(torch::tensor({500.0, 0.0, 256.0, 0.0, 500.0, 256.0, 0.0, 0.0, 1.0}, torch::kFloat64)
+                                 .reshape({3, 3})));
     R.push_back(Value::array(torch::eye(3, torch::kFloat64)));
     T.push_back(Value::array(torch::zeros({3, 1}, torch::kFloat64)));
     D.push_back(Value::array(torch::zeros({5, 1}, torch::kFloat64)));

@@ -92,6 +92,14 @@ TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[model][checkp
                     Catch::Contains("fc_3.weight") && Catch::Contains("[256, 255, 1]"));
   CHECK(torch::equal(before, model->heads->fc_3->weight));  // nothing copied
   CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "missing.pth"), Catch::Contains("alpha_fc.bias"));
+  // A key the reference network does not have, and integer or boolean values where weights go.
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "extra_key.pth"),
+                    Catch::Contains("extra_key.pth: key 'fc_5.weight' is not part of the TransHuman reference"));
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "int_tensor.pth"),
+                    Catch::Contains("key 'alpha_fc.bias' holds Long values, the model expects Float"));
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "bool_tensor.pth"),
+                    Catch::Contains("key 'rgb_fc.bias' holds Bool values"));
+  CHECK(torch::equal(before, model->heads->fc_3->weight));
   CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "nonexistent.pth"), Catch::Contains("does not exist"));
   const auto junk = dir / "junk.pth";
   std::ofstream(junk.string()) << "not a zip file";

@@ -3,8 +3,9 @@ values, using Debian's python3-torch; and the expected tensors as raw arrays for
 
 Usage: model_checkpoint.py <dir>
 Writes <dir>/full.pth ({'net', 'optim', 'scheduler', 'recorder', 'epoch'}), <dir>/bare.pth (the
-state dict itself, an OrderedDict), <dir>/wrong_shape.pth, <dir>/missing.pth, <dir>/resnet18.pth
-(the ResNet part under torchvision's names), and the 'net' tensors as <dir>/<name>.bin + manifest.txt (float32/int64).
+state dict itself, an OrderedDict), <dir>/wrong_shape.pth, <dir>/missing.pth, <dir>/extra_key.pth,
+<dir>/int_tensor.pth, <dir>/bool_tensor.pth, <dir>/resnet18.pth (the ResNet part under
+torchvision's names), and the 'net' tensors as <dir>/<name>.bin + manifest.txt (float32/int64).
 """
 import collections
 import os
@@ -88,6 +89,15 @@ def main(out):
     missing = collections.OrderedDict(sd)
     del missing["alpha_fc.bias"]
     torch.save({"net": missing}, os.path.join(out, "missing.pth"))
+    extra = collections.OrderedDict(sd)
+    extra["fc_5.weight"] = torch.randn(128, 128, 1)  # not in the reference network
+    torch.save({"net": extra}, os.path.join(out, "extra_key.pth"))
+    integer = collections.OrderedDict(sd)
+    integer["alpha_fc.bias"] = torch.ones(1, dtype=torch.int64)
+    torch.save({"net": integer}, os.path.join(out, "int_tensor.pth"))
+    flags = collections.OrderedDict(sd)
+    flags["rgb_fc.bias"] = torch.ones(3, dtype=torch.bool)
+    torch.save({"net": flags}, os.path.join(out, "bool_tensor.pth"))
     with open(os.path.join(out, "manifest.txt"), "w") as m:
         for k, v in sd.items():
             if k.startswith(("xyzc_net", "encoder.model.layer3", "encoder.model.layer4", "encoder.model.fc")):

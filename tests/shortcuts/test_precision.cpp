@@ -59,6 +59,14 @@ Difference render_difference(Frames& f, const Products& a, const Products& b, si
 TEST_CASE("on a trained network, fp32 products through oneDNN render every ray within 1e-5 of BLAS products",
           "[precision][onednn]") {
   torch::set_num_threads(1);
+  if (!th::model::onednn_products_agree()) {
+    // This LibTorch's oneDNN product is wrong (the probe compares it with BLAS): it is refused.
+    CHECK_THROWS_WITH(resolve_products("fp32", "onednn", torch::kCPU),
+                      Catch::Contains("disagrees with BLAS on a probe product"));
+    CHECK(!resolve_products("fp32", "auto", torch::kCPU).onednn);
+    WARN("oneDNN's fp32 product disagrees with BLAS in this LibTorch: only its refusal was checked");
+    return;
+  }
   Frames f(surface_config({"data.ratio=0.5"}));
   const auto blas = resolve_products("fp32", "blas", torch::kCPU), onednn = resolve_products("fp32", "onednn", torch::kCPU);
   REQUIRE(!blas.onednn);
