@@ -40,8 +40,9 @@ int main(int argc, char** argv) {
     cli.add_flag("--resume", resume, "continue the run in --out from its latest checkpoint");
     cli.add_option("--max-steps", max_steps, "stop after this many steps in all (with a checkpoint)")
         ->check(th::app::at_least(0));
-    cli.add_option("--nproc", nproc, "data-parallel training with this many local worker processes")
-        ->check(th::app::at_least(1));
+    cli.add_option("--nproc", nproc, "data-parallel training with this many local worker processes (at most 8 "
+                                     "per core)")
+        ->check(th::app::in_range(1, 1024));
     cli.add_option("--rank-state", rank_state_dir, "every rank writes its final state to DIR/rank<r>.pt")
         ->group("");  // for tests
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
@@ -52,6 +53,9 @@ int main(int argc, char** argv) {
     if (nproc > 1 && !options.dry_run) {
       if (std::getenv("WORLD_SIZE"))
         th::fail("--nproc starts the ranks itself; it cannot be used inside a launcher (WORLD_SIZE is set)");
+      const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
+      if (nproc > 8 * cores)
+        th::fail("--nproc ", nproc, " is more than 8 ranks per core (this machine has ", cores, "); at most ", 8 * cores);
       const auto config = th::config::load<th::Config>(options.config, options.overrides);
       th::dist::LaunchOptions launch;
       launch.nproc = nproc;
@@ -68,6 +72,7 @@ int main(int argc, char** argv) {
       options.quiet = true;  // one voice: rank 0 logs, the others report errors only
       options.out.clear();   // and write nothing
     }
+    if (lead && !options.dry_run) options.preflight = th::app::load_first_training_sample;
     const auto ctx = th::app::start_run(options, "transhuman-train",
                                         options.dry_run || !lead ? "" : "runs/train");
     if (distributed && ctx.config.threads == 0) {

@@ -445,6 +445,12 @@ for f in glob.glob(sys.argv[1] + '/*/new_params/*.npy'):
 EOF2
 check "training with the body out of every view (calibration_check=warn)" 2 "error: sample 'CoreView_ && , target view && : the body's box is outside the image, no training patch can be sampled" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$d") --out "$work/t_away" --max-steps 1 data.calibration_check=warn
+check "data.patch.size larger than the image" 2 "config key 'data.patch.size' = 200: larger than the 32x32 target image of '" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/t_patch" --max-steps 1 data.patch.size=200
+if [[ -e "$work/t_patch" ]]; then ok=FAIL; failures=$((failures + 1)); else ok=ok; fi
+rows+=("| ... no run folder written (the first training sample is loaded before it) | - | - | - | | $ok |")
+check "--dry-run with data.patch.size larger than the image" 2 "config key 'data.patch.size' = 200: larger than the" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run data.patch.size=200
 "${evaluate[@]}" $(on "$data") --out "$work/e_good" >/dev/null 2>&1 || echo "hostile: the tiny evaluation failed" >&2
 cp -r "$work/e_good" "$work/e_badjson"
 printf '{"setting": "identity", "psnr": 20.' >"$work/e_badjson/summary.json"
@@ -462,6 +468,13 @@ if [[ $(sum_of "$work/e_other/index.html") == "$page_sum" && $(cat "$work/site/i
 rows+=("| ... both pages unchanged | - | - | - | | $ok |")
 check_ok "report of an evaluation into its own folder" \
   "$apps/transhuman-report" page --out "$work/e_good" --eval "$work/e_good"
+many=$(($(nproc) * 8 + 1))
+if ((many <= 1024)); then
+  check "train --nproc $many (more than 8 ranks per core)" 2 "--nproc $many is more than 8 ranks per core (this machine has" \
+    "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/t_nproc" --nproc "$many"
+fi
+check "train --nproc 100000" 2 "--nproc: must be in [1, 1024], not 100000" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/t_nproc" --nproc 100000
 check "render --dry-run --human <nobody>" 2 "nobody" \
   "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --human nobody
 check "render --dry-run --camera 99" 2 "camera 99 out of range" \

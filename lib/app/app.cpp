@@ -260,6 +260,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
         claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, check_only);
     };
     claim(true);
+    if (o.preflight) o.preflight(ctx.config);
     std::error_code ec;
     fs::create_directories(ctx.run_dir, ec);
     if (ec) fail("cannot create run directory '", out, "': ", ec.message());

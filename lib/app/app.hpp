@@ -38,6 +38,9 @@ struct CommonOptions {
   // or lies inside one. start_run adds the config's own (config file, data root, split file,
   // body model, weights files).
   std::vector<std::pair<std::string, std::string>> inputs;
+  // Run by start_run once the config is loaded, before the run folder is written: checks that
+  // need the data (the first training sample), so that a failing run leaves nothing behind.
+  std::function<void(const Config&)> preflight;
 };
 
 // Registers --config, --out, --device, --threads, --dry-run, --verbose and the positional

@@ -11,6 +11,12 @@
 
 namespace th::app {
 
+void load_first_training_sample(const Config& c) {
+  data::Dataset ds(c.data, c.data.train_setting, data::Dataset::Mode::Train, data::load_body_model(c.data));
+  if (ds.size() == 0) fail("setting '", c.data.train_setting, "' lists no samples");
+  ds.load(0, uint64_t(c.seed));
+}
+
 void print_summary(const RunContext& ctx, bool dry_run, const std::string& checkpoint) {
   const Config& c = ctx.config;
   spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", c.data.dataset,
@@ -20,8 +26,10 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
   try {
     auto smpl = data::load_body_model(c.data);
     spdlog::info("body model: {} vertices, {} faces", smpl->num_vertices(), smpl->faces.size(0));
+    bool training = true;  // the training setting is loaded as training loads it (patches)
     for (const auto& setting : {c.data.train_setting, c.data.test_setting}) {
-      data::Dataset ds(c.data, setting, data::Dataset::Mode::Test, smpl);
+      data::Dataset ds(c.data, setting, training ? data::Dataset::Mode::Train : data::Dataset::Mode::Test, smpl);
+      training = false;
       spdlog::info("  '{}': {} samples from {} humans", setting, ds.size(), ds.humans().size());
       if (!dry_run) continue;
       if (ds.size() == 0) fail("setting '", setting, "' lists no samples");

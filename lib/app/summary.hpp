@@ -11,4 +11,9 @@ namespace th::app {
 // plain summary only warns that the data is not available).
 void print_summary(const RunContext& ctx, bool dry_run = false, const std::string& checkpoint = "");
 
+// Loads sample 0 of the training setting as training does (patches included), so that what
+// only the data can refuse (a patch larger than the image, a body outside the view) fails
+// before a run folder is written.
+void load_first_training_sample(const Config& config);
+
 }  // namespace th::app

@@ -216,6 +216,9 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     // edge values included, as the reference's `msk * bound_mask > 0` [parity].
     const cv::Mat person = (target.mask != 0) & (bmask != 0);
     const auto& p = config_.patch;
+    if (config_.patch.size > W || config_.patch.size > H)
+      fail("config key 'data.patch.size' = ", config_.patch.size, ": larger than the ", W, "x", H,
+           " target image of '", human.name(), "' view ", s.target_view, " (at data.ratio ", config_.ratio, ")");
     if (cv::countNonZero(bmask) == 0)
       fail("sample '", human.name(), "' frame ", it.frame, ", target view ", s.target_view,
            ": the body's box is outside the image, no training patch can be sampled (is the body in that view? "
