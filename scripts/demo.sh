@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
 bash scripts/build.sh transhuman-synth transhuman-train transhuman-eval transhuman-render transhuman-mesh \
-  transhuman-report
+  transhuman-report transhuman-view
 
 bin=build/apps
 data=data/synthetic
@@ -55,3 +55,5 @@ echo "Identity generalization on the unseen synthetic people ($(date -u +%F)):"
 cat "$report/results.md"
 echo "Report: open $report/index.html in a browser (works from the folder, no server); beside it"
 echo "        results.md, per_image.csv, eval_identity/images/, orbit/ (frames, video.mp4), the mesh .ply"
+echo "Viewer: $bin/transhuman-view --config configs/demo.yaml --checkpoint $ckpt"
+echo "        then open the URL it prints: drag the camera around the person"

@@ -9,6 +9,7 @@ packages=(
   libopencv-dev libcli11-dev libspdlog-dev libfmt-dev catch2 libyaml-cpp-dev libgloo-dev
   libzstd-dev
   chromium libjs-three  # the HTML report: three.js for its 3D viewer, Chromium for its test
+  libcpp-httplib-dev  # transhuman-view serves its page over HTTP
   python3 python3-numpy python3-scipy python3-torch python3-torchvision python3-skimage python3-opencv
 )
 # Optional extras (fuzzing): installed only with --with-fuzz.

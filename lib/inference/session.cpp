@@ -91,13 +91,25 @@ video::PathCamera Session::dataset_camera(const PreparedFrame& frame, int view) 
 
 torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
                               int height, int64_t band_pixels) const {
+  ViewControl control;
+  control.band_pixels = band_pixels;
+  return render_view(frame, camera, width, height, control)->rgb;
+}
+
+std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& frame, const video::PathCamera& camera,
+                                                        int width, int height, const ViewControl& control) const {
   torch::NoGradGuard no_grad;
-  auto image = torch::zeros({int64_t(height) * width, 3}, torch::kFloat32);
+  const int64_t n = int64_t(height) * width;
+  auto rgb = torch::zeros({n, 3}, torch::kFloat32), depth = torch::zeros({n}, torch::kFloat32),
+       acc = torch::zeros({n}, torch::kFloat32);
   const auto bounds = frame.sample.body.bounds.to(torch::kFloat64);
+  RenderConfig config = config_.render;
+  if (control.samples > 0) config.samples = control.samples;
   // A band of rows at a time: the rays' memory is bounded by the band, not by the image (a
   // 512x512 view is one band).
-  const int64_t rows = std::max<int64_t>(1, band_pixels / width);
+  const int64_t rows = std::max<int64_t>(1, control.band_pixels / width);
   for (int64_t y0 = 0; y0 < height; y0 += rows) {
+    if (control.cancelled && control.cancelled()) return std::nullopt;
     const int64_t y1 = std::min<int64_t>(height, y0 + rows);
     auto pixels = data::pixel_grid(width, int(y1 - y0));
     pixels.select(1, 1).add_(y0);
@@ -109,12 +121,14 @@ torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamer
     if (r.size() == 0) continue;
     const auto vp = pixels.index({valid});
     const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
-    const auto result = model::render_rays(*model_, frame.cache, r, config_.render);
-    image.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
+    const auto result = model::render_rays(*model_, frame.cache, r, config);
+    rgb.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
+    depth.index_copy_(0, flat, result.depth.to(torch::kCPU, torch::kFloat32));
+    acc.index_copy_(0, flat, result.acc.to(torch::kCPU, torch::kFloat32));
   }
-  pipeline::require_finite_output(image, "checkpoint '" + checkpoint_.string() + "', " + frame.sample.human +
-                                             " frame " + std::to_string(frame.sample.frame));
-  return image.view({height, width, 3});
+  pipeline::require_finite_output(rgb, "checkpoint '" + checkpoint_.string() + "', " + frame.sample.human +
+                                           " frame " + std::to_string(frame.sample.frame));
+  return ViewImages{rgb.view({height, width, 3}), depth.view({height, width}), acc.view({height, width})};
 }
 
 resources::Estimate Session::render_estimate(const PreparedFrame& frame, int width, int height, int frames) const {

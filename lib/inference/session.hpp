@@ -7,7 +7,9 @@
 #include <torch/types.h>
 
 #include <filesystem>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -65,6 +67,20 @@ class Session {
   static constexpr int64_t kRenderBandPixels = int64_t{1} << 18;
   torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width, int height,
                        int64_t band_pixels = kRenderBandPixels) const;
+  // What an interactive view needs beside rgb: depth (metres along the ray, 0 where no ray meets
+  // the box) and accumulated opacity, (H, W) float32 each.
+  struct ViewImages {
+    torch::Tensor rgb, depth, acc;
+  };
+  // `samples` per ray (0: render.samples); `cancelled`, polled between bands of rows, ends the
+  // render early (nullopt then).
+  struct ViewControl {
+    int samples = 0;
+    std::function<bool()> cancelled;
+    int64_t band_pixels = kRenderBandPixels;
+  };
+  std::optional<ViewImages> render_view(const PreparedFrame& frame, const video::PathCamera& camera, int width,
+                                        int height, const ViewControl& control) const;
   // Peak memory and samples of rendering `frames` frames like `frame` at width x height.
   resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height, int frames) const;
 

@@ -1,0 +1,177 @@
+#pragma once
+// The page transhuman-view serves: the rendered person in an <img>, the camera dragged with
+// three.js's OrbitControls (orbit, zoom, pan around the body's centre; no WebGL is needed),
+// progressive requests (small and fast while moving, full size when the camera rests), a frame
+// slider, a person selector, snaps to the dataset cameras and the reference views.
+
+namespace th::view {
+
+inline constexpr const char* kPage = R"HTML(<!doctype html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<title>TransHuman viewer</title>
+<style>
+body { font: 14px system-ui, sans-serif; margin: 0; background: #1e2430; color: #dde; }
+header, #controls, #refs { padding: 6px 12px; }
+#stage { position: relative; width: 512px; height: 512px; margin: 0 12px; background: #000; cursor: grab;
+         touch-action: none; user-select: none; }
+#stage img { width: 100%; height: 100%; image-rendering: auto; pointer-events: none; }
+#refs img { height: 96px; margin-right: 6px; border: 1px solid #445; }
+button { margin: 2px; }
+#status { font-family: monospace; }
+</style>
+<script src="three/three.min.js"></script>
+<script src="three/OrbitControls.js"></script>
+</head>
+<body>
+<header><b>TransHuman viewer</b> &mdash; drag to orbit, wheel to zoom, right-drag to pan</header>
+<div id="controls">
+  person <select id="human"></select>
+  frame <input id="frame" type="range" min="0" max="0" step="1" value="0"> <span id="frame-label"></span>
+  show <select id="mode"><option>rgb</option><option>depth</option><option>acc</option></select>
+  <div id="snaps">cameras: </div>
+</div>
+<div id="stage"><img id="view" alt="rendered view"></div>
+<div id="status">loading</div>
+<div id="refs">reference views: </div>
+<script>
+'use strict';
+const $ = (id) => document.getElementById(id);
+const state = { client: Math.random().toString(36).slice(2), info: null, frame: null, human: 0, frames: [], seq: 0, shown: 0, size: [512, 512], timer: 0 };
+const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
+let controls = null;
+
+async function json(url) {
+  const r = await fetch(url);
+  if (!r.ok) throw new Error(url + ': ' + (await r.text()));
+  return r.json();
+}
+
+// Asks for a view; `fast` while moving: a small image with few samples.
+async function request(fast) {
+  const seq = ++state.seq;
+  const [w0, h0] = state.size;
+  const scale = fast ? Math.min(1, 128 / Math.max(w0, h0)) : 1;
+  const w = Math.max(8, Math.round(w0 * scale)), h = Math.max(8, Math.round(h0 * scale));
+  const dir = new THREE.Vector3();
+  camera.getWorldDirection(dir);
+  const v = (p) => [p.x, p.y, p.z].map((x) => x.toFixed(6)).join(',');
+  const params = new URLSearchParams({
+    human: state.human, frame: state.frames[$('frame').value], eye: v(camera.position), forward: v(dir),
+    up: v(camera.up), fovy: camera.fov.toFixed(4), width: w, height: h, mode: $('mode').value, seq,
+    client: state.client });
+  if (fast) params.set('samples', 16);
+  const t0 = performance.now();
+  const r = await fetch('api/render?' + params);
+  if (r.status === 409) return;  // a newer request took over
+  if (!r.ok) { $('status').textContent = 'error: ' + (await r.text()); return; }
+  const blob = await r.blob();
+  if (seq < state.shown) return;
+  state.lastBytes = new Uint8Array(await blob.arrayBuffer());
+  state.lastFast = fast;
+  state.shown = seq;
+  const img = $('view');
+  if (img.src) URL.revokeObjectURL(img.src);
+  img.src = URL.createObjectURL(blob);
+  img.dataset.seq = seq;
+  img.dataset.size = w + 'x' + h;
+  $('status').textContent = (fast ? 'moving' : 'refined') + ': ' + w + 'x' + h + ' in ' +
+      Math.round(performance.now() - t0) + ' ms';
+  document.body.dataset.rendered = String(Number(document.body.dataset.rendered || 0) + 1);
+}
+
+// While the camera moves: fast views; 250 ms after it rests: the refined one.
+function moved() {
+  request(true);
+  clearTimeout(state.timer);
+  state.timer = setTimeout(() => request(false), 250);
+}
+
+function snap(c) {
+  const cam = state.frame.cameras[c];
+  camera.position.set(...cam.eye);
+  camera.up.set(...cam.up);
+  camera.fov = cam.fovy;
+  camera.aspect = cam.width / cam.height;
+  camera.updateProjectionMatrix();
+  const target = new THREE.Vector3(...cam.eye).add(new THREE.Vector3(...cam.forward).multiplyScalar(
+      new THREE.Vector3(...cam.eye).distanceTo(new THREE.Vector3(...state.frame.center))));
+  if (controls) controls.dispose();
+  controls = new THREE.OrbitControls(camera, $('stage'));
+  controls.target.copy(target);
+  controls.update();
+  controls.addEventListener('change', moved);
+  state.size = [cam.width, cam.height];
+  $('stage').style.height = Math.round(512 * cam.height / cam.width) + 'px';
+  request(false);
+}
+
+async function loadFrame() {
+  const frame = state.frames[$('frame').value];
+  $('frame-label').textContent = frame;
+  state.frame = await json('api/frame?human=' + state.human + '&frame=' + frame);
+  const snaps = $('snaps');
+  snaps.textContent = 'cameras: ';
+  state.frame.cameras.forEach((_, c) => {
+    const b = document.createElement('button');
+    b.textContent = c;
+    b.onclick = () => snap(c);
+    snaps.append(b);
+  });
+  const refs = $('refs');
+  refs.textContent = 'reference views: ';
+  for (let i = 0; i < state.frame.references; ++i) {
+    const img = document.createElement('img');
+    img.src = 'api/reference?human=' + state.human + '&frame=' + frame + '&index=' + i;
+    refs.append(img);
+  }
+}
+
+async function start() {
+  state.info = await json('api/info');
+  const sel = $('human');
+  state.info.humans.forEach((h, i) => sel.append(new Option(h.name, i)));
+  const choose = async (first) => {
+    state.human = Number(sel.value);
+    state.frames = state.info.humans[state.human].frames;
+    $('frame').max = state.frames.length - 1;
+    $('frame').value = 0;
+    await loadFrame();
+    snap(Math.min(state.info.view, state.frame.cameras.length - 1));
+  };
+  sel.onchange = () => choose();
+  $('frame').oninput = async () => { await loadFrame(); request(false); };
+  $('mode').onchange = () => request(false);
+  await choose(true);
+}
+// ?selftest=drag (for tests): once the first view is shown, drags the camera 120 px with
+// dispatched mouse events and reports in <body data-selftest> whether fast views came while
+// moving, a refined one after, and whether the image changed.
+async function selftest() {
+  const until = (cond) => new Promise((ok) => { const t = setInterval(() => { if (cond()) { clearInterval(t); ok(); } }, 20); });
+  await until(() => Number(document.body.dataset.rendered || 0) >= 1);
+  const before = state.lastBytes, shown = Number(document.body.dataset.rendered);
+  let fast = 0;
+  const stage = $('stage'), box = stage.getBoundingClientRect();
+  const at = (dx) => ({ clientX: box.left + box.width / 2 + dx, clientY: box.top + box.height / 2, button: 0, bubbles: true });
+  stage.dispatchEvent(new MouseEvent('mousedown', at(0)));
+  for (let dx = 10; dx <= 120; dx += 10) {
+    document.dispatchEvent(new MouseEvent('mousemove', at(dx)));
+    await new Promise((ok) => setTimeout(ok, 60));
+    if (state.lastFast) fast += 1;
+  }
+  document.dispatchEvent(new MouseEvent('mouseup', at(120)));
+  await until(() => Number(document.body.dataset.rendered) > shown && !state.lastFast);
+  const after = state.lastBytes;
+  const changed = before.length !== after.length || before.some((b, i) => b !== after[i]);
+  document.body.dataset.selftest = 'fast views while moving: ' + fast + '; refined: yes; image changed: ' + (changed ? 'yes' : 'no');
+}
+if (new URLSearchParams(location.search).get('selftest') === 'drag') selftest();
+start().catch((e) => { $('status').textContent = 'error: ' + e.message; document.body.dataset.error = e.message; });
+</script>
+</body>
+</html>
+)HTML";
+
+}  // namespace th::view
