@@ -11,6 +11,9 @@
 //                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C instead of
 //                         eye..height renders dataset camera C exactly
 //   GET /api/reference?human=H&frame=F&index=I                    reference view I (PNG)
+//   GET /api/evaluate?human=H&frame=F&camera=C   dataset camera C scored as transhuman-eval
+//                         scores it: {"psnr", "ssim"} (JSON)
+//   GET /api/ground_truth?human=H&frame=F&camera=C                its ground truth (PNG)
 // One render runs at a time; a request with a higher seq from the same page (client=ID) cancels
 // that page's request in flight (409 for the cancelled one), so a dragged camera never waits
 // behind stale frames.
@@ -195,6 +198,28 @@ class Viewer {
     const int count = int(prepared.sample.ref_images.size(0));
     const int i = int_param(req, "index", 0, count - 1);
     return png(prepared.sample.ref_images[i].permute({1, 2, 0}));
+  }
+
+  // Dataset camera C of a frame scored as transhuman-eval scores it, with its ground truth.
+  std::string evaluate(const httplib::Request& req) {
+    const auto [h, f] = person_frame(req);
+    const int c = int_param(req, "camera", 0, session_.human(h).num_cameras() - 1);
+    std::unique_lock<std::timed_mutex> lock(render_mutex_, std::defer_lock);
+    if (!lock.try_lock_for(std::chrono::seconds(60))) throw BadRequest{"busy: another render has run for a minute"};
+    const auto r = session_.evaluate_view(h, f, c);
+    std::ostringstream out;
+    out.precision(10);
+    out << "{\"human\":" << json_string(session_.human(h).name()) << ",\"frame\":" << f << ",\"view\":" << c
+        << ",\"psnr\":" << r.psnr << ",\"ssim\":" << r.ssim << "}";
+    return out.str();
+  }
+
+  // The ground truth of dataset camera C (the target image inside the body's box), PNG.
+  std::string ground_truth(const httplib::Request& req) {
+    const auto [h, f] = person_frame(req);
+    const int c = int_param(req, "camera", 0, session_.human(h).num_cameras() - 1);
+    const auto sample = session_.dataset().load_item({h, f, c}, 0);
+    return png(sample.target_image * sample.box_mask.unsqueeze(-1).to(torch::kFloat32));
   }
 
   // nullopt: cancelled by a newer request.
@@ -396,6 +421,12 @@ int main(int argc, char** argv) {
     }));
     server.Get("/api/reference", guarded([&](const httplib::Request& req, httplib::Response& res) {
       res.set_content(viewer.reference(req), "image/png");
+    }));
+    server.Get("/api/evaluate", guarded([&](const httplib::Request& req, httplib::Response& res) {
+      res.set_content(viewer.evaluate(req), "application/json");
+    }));
+    server.Get("/api/ground_truth", guarded([&](const httplib::Request& req, httplib::Response& res) {
+      res.set_content(viewer.ground_truth(req), "image/png");
     }));
     server.Get("/api/render", guarded([&](const httplib::Request& req, httplib::Response& res) {
       const auto image = viewer.render(req);

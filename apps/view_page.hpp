@@ -17,6 +17,8 @@ header, #controls, #refs { padding: 6px 12px; }
 #stage { position: relative; width: 512px; height: 512px; margin: 0 12px; background: #000; cursor: grab;
          touch-action: none; user-select: none; }
 #stage img { width: 100%; height: 100%; image-rendering: auto; pointer-events: none; }
+#row { display: flex; align-items: flex-start; }
+#truth img { width: 512px; }
 #refs img { height: 96px; margin-right: 6px; border: 1px solid #445; }
 button { margin: 2px; }
 #status { font-family: monospace; }
@@ -32,7 +34,8 @@ button { margin: 2px; }
   show <select id="mode"><option>rgb</option><option>depth</option><option>acc</option></select>
   <div id="snaps">cameras: </div>
 </div>
-<div id="stage"><img id="view" alt="rendered view"></div>
+<div id="row"><div id="stage"><img id="view" alt="rendered view"></div>
+<div id="truth" hidden><img id="truth-img" alt="ground truth"><div id="score"></div></div></div>
 <div id="status">loading</div>
 <div id="refs">reference views: </div>
 <script>
@@ -83,6 +86,7 @@ async function request(fast) {
 
 // While the camera moves: fast views; 250 ms after it rests: the refined one.
 function moved() {
+  $('truth').hidden = true;
   request(true);
   clearTimeout(state.timer);
   state.timer = setTimeout(() => request(false), 250);
@@ -105,6 +109,19 @@ function snap(c) {
   state.size = [cam.width, cam.height];
   $('stage').style.height = Math.round(512 * cam.height / cam.width) + 'px';
   request(false);
+  showTruth(c);
+}
+
+// Beside a snapped view: its ground truth, and its PSNR and SSIM as transhuman-eval scores them.
+async function showTruth(c) {
+  const q = 'human=' + state.human + '&frame=' + state.frames[$('frame').value] + '&camera=' + c;
+  $('truth-img').src = 'api/ground_truth?' + q;
+  $('score').textContent = 'scoring camera ' + c + ' ...';
+  $('truth').hidden = false;
+  const r = await json('api/evaluate?' + q);
+  $('score').textContent = 'ground truth, camera ' + c + ': PSNR ' + r.psnr.toFixed(2) + ' dB, SSIM ' +
+      r.ssim.toFixed(3) + ' (as transhuman-eval scores it)';
+  document.body.dataset.psnr = r.psnr;
 }
 
 async function loadFrame() {

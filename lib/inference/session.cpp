@@ -79,6 +79,22 @@ PreparedFrame Session::prepare(int human, int frame, int view) const {
   return out;
 }
 
+pipeline::ViewResult Session::evaluate_view(int human_index, int frame, int view) const {
+  const auto& h = human(human_index);
+  if (frame < 0 || frame >= h.num_frames())
+    fail(h.name(), ": frame ", frame, " out of range [0, ", h.num_frames(), ")");
+  if (view < 0 || view >= h.num_cameras())
+    fail(h.name(), ": camera ", view, " out of range [0, ", h.num_cameras(), ")");
+  torch::NoGradGuard no_grad;
+  const auto sample = dataset_->load_item({human_index, frame, view}, 0);
+  const auto inputs = pipeline::frame_inputs(sample, canonical_, tokens_->labels(sample.body), device_);
+  try {
+    return pipeline::evaluate_view(*model_, config_.render, sample, inputs, nullptr, device_, nullptr);
+  } catch (const Error& e) {
+    fail("checkpoint '", checkpoint_.string(), "', ", e.what());
+  }
+}
+
 video::PathCamera Session::dataset_camera(const PreparedFrame& frame, int view) const {
   const auto& h = human(frame.human);
   if (view < 0 || view >= h.num_cameras())

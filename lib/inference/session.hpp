@@ -81,6 +81,10 @@ class Session {
   };
   std::optional<ViewImages> render_view(const PreparedFrame& frame, const video::PathCamera& camera, int width,
                                         int height, const ViewControl& control) const;
+  // Dataset view `view` of frame `frame` rendered and scored exactly as transhuman-eval scores
+  // it (PSNR over the rays of the body's box, SSIM on its crop; no LPIPS): what a viewer shows
+  // beside the ground truth when it snaps to a dataset camera.
+  pipeline::ViewResult evaluate_view(int human, int frame, int view) const;
   // Peak memory and samples of rendering `frames` frames like `frame` at width x height.
   resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height, int frames) const;
 

@@ -5,6 +5,7 @@ Starts the viewer on a free port of 127.0.0.1 and checks:
   - /api/info and /api/frame describe the people, frames and cameras;
   - a render from a dataset camera's eye/forward/up/fovy is a PNG of the asked size, and a snap
     (camera=C) is the same image, byte for byte, as `transhuman-render --camera C`;
+  - a snapped camera's PSNR and SSIM (/api/evaluate) equal transhuman-eval's for that view;
   - depth and opacity displays; a request older than one already seen is answered 409;
   - bad requests get 400 and a message naming the parameter; paths outside the API get 404;
   - in headless Chromium, a drag of the camera brings fast views, then a refined one, and the
@@ -13,6 +14,7 @@ Starts the viewer on a free port of 127.0.0.1 and checks:
 Standard library only.
 """
 import argparse
+import csv
 import json
 import os
 import re
@@ -117,6 +119,22 @@ def main():
                 pos += 12 + n
             return zlib.decompress(idat)
         check(status == 200 and pixels(snap) == pixels(rendered), 'a snap equals transhuman-render --camera 3')
+
+        # A snapped camera's PSNR and SSIM are transhuman-eval's for that view.
+        ev_out = os.path.join(args.work, 'eval')
+        subprocess.run([os.path.join(args.bin, 'transhuman-eval'), *common, '--checkpoint', args.checkpoint,
+                        '--out', ev_out, 'eval.limit=1', 'eval.save_images=false'], check=True, capture_output=True)
+        with open(os.path.join(ev_out, 'per_image.csv')) as f:
+            row = next(csv.DictReader(f))
+        names = [h['name'] for h in info['humans']]
+        status, body = get(base, '/api/evaluate', {'human': names.index(row['human']), 'frame': row['frame'],
+                                                   'camera': row['view']})
+        score = json.loads(body) if status == 200 else {}
+        check(status == 200 and abs(score['psnr'] - float(row['psnr'])) < 1e-5 and
+              abs(score['ssim'] - float(row['ssim'])) < 1e-5,
+              f"a snap's PSNR/SSIM equal transhuman-eval's ({score} against {row['psnr']}, {row['ssim']})")
+        status, gt = get(base, '/api/ground_truth', {'human': 0, 'frame': frame, 'camera': 3})
+        check(status == 200 and png_size(gt) == png_size(rendered), 'the ground truth of a dataset camera')
 
         status, ref = get(base, '/api/reference', {'human': 0, 'frame': frame, 'index': 0})
         check(status == 200 and png_size(ref) is not None, 'a reference view as PNG')
