@@ -152,7 +152,8 @@ std::string png(const torch::Tensor& image) {
 
 class Viewer {
  public:
-  Viewer(const Session& session, int view, int max_size) : session_(session), view_(view), max_size_(max_size) {}
+  Viewer(const Session& session, int view, int max_size, int start_human, int start_frame)
+      : session_(session), view_(view), max_size_(max_size), start_human_(start_human), start_frame_(start_frame) {}
 
   std::string info() const {
     std::ostringstream out;
@@ -167,7 +168,7 @@ class Viewer {
     }
     const auto& c = session_.config();
     out << "],\"samples\":" << c.render.samples << ",\"max_size\":" << max_size_ << ",\"view\":" << view_
-        << ",\"max_samples\":4096}";
+        << ",\"max_samples\":4096,\"start\":{\"human\":" << start_human_ << ",\"frame\":" << start_frame_ << "}}";
     return out.str();
   }
 
@@ -304,7 +305,7 @@ class Viewer {
   }
 
   const Session& session_;
-  int view_, max_size_;
+  int view_, max_size_, start_human_, start_frame_;
   std::map<std::pair<int, int>, PreparedFrame> prepared_;
   std::mutex prepare_mutex_;
   std::timed_mutex render_mutex_;
@@ -357,11 +358,15 @@ int main(int argc, char** argv) {
                  "and the person re-renders from there (open the printed URL in a browser)."};
     th::app::CommonOptions options;
     th::app::ModelOptions model;
-    std::string host = "127.0.0.1";
+    std::string host = "127.0.0.1", human;
+    int frame = -1;
     int port = 7007, view = 3, max_size = 512;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
     th::app::add_precision_option(cli, options);
+    cli.add_option("--human", human, "the person shown first (folder name); default: the setting's first");
+    cli.add_option("--frame", frame, "the body frame shown first (annots index); default: the person's first test frame")
+        ->check(th::app::at_least(0));
     cli.add_option("--host", host, "address to listen on (default 127.0.0.1: this machine only)");
     cli.add_option("--port", port, "port")->check(th::app::in_range(1, 65535));
     cli.add_option("--view", view, "camera whose image size the first view takes (SPEC 7: 3)")
@@ -375,8 +380,12 @@ int main(int argc, char** argv) {
     const Session session(ctx.config, ctx.device, model.checkpoint);
     if (view >= session.human(0).num_cameras())
       th::fail("--view ", view, ": ", session.human(0).name(), " has ", session.human(0).num_cameras(), " cameras");
+    const int start_human = session.find_human(human);
+    if (frame >= session.human(start_human).num_frames())
+      th::fail("--frame ", frame, ": ", session.human(start_human).name(), " has ", session.human(start_human).num_frames(),
+               " frames");
     if (options.dry_run) return 0;
-    Viewer viewer(session, view, max_size);
+    Viewer viewer(session, view, max_size, start_human, frame);
     const fs::path three = th::report::find_three_js();
 
     httplib::Server server;

@@ -149,11 +149,18 @@ async function start() {
   state.info = await json('api/info');
   const sel = $('human');
   state.info.humans.forEach((h, i) => sel.append(new Option(h.name, i)));
+  sel.value = state.info.start.human;
   const choose = async (first) => {
     state.human = Number(sel.value);
-    state.frames = state.info.humans[state.human].frames;
+    state.frames = state.info.humans[state.human].frames.slice();
+    const start = state.info.start;
+    // --frame: shown first, also when the setting does not list it.
+    if (first && start.frame >= 0 && !state.frames.includes(start.frame)) {
+      state.frames.push(start.frame);
+      state.frames.sort((a, b) => a - b);
+    }
     $('frame').max = state.frames.length - 1;
-    $('frame').value = 0;
+    $('frame').value = first && start.frame >= 0 ? state.frames.indexOf(start.frame) : 0;
     await loadFrame();
     snap(Math.min(state.info.view, state.frame.cameras.length - 1));
   };

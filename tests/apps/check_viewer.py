@@ -81,6 +81,7 @@ def main():
         status, body = get(base, '/api/info')
         info = json.loads(body)
         check(status == 200 and len(info['humans']) >= 1 and info['humans'][0]['frames'], 'info lists people and frames')
+        check(info['start'] == {'human': 0, 'frame': -1}, f"info says what to show first ({info['start']})")
         frame = info['humans'][0]['frames'][0]
         status, body = get(base, '/api/frame', {'human': 0, 'frame': frame})
         fr = json.loads(body)
@@ -184,6 +185,12 @@ def main():
             server.kill()
             code = 'hung'
         check(code == 0, f'SIGINT stops the viewer with exit 0 ({code})')
+    for flags, message in ((['--human', 'nobody'], "no person 'nobody' in setting"),
+                           (['--frame', '100000'], '--frame 100000: ')):
+        p = subprocess.run([os.path.join(args.bin, 'transhuman-view'), *common, '--checkpoint', args.checkpoint,
+                            '--dry-run', *flags], capture_output=True, text=True)
+        last = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ''
+        check(p.returncode == 2 and message in last, f'{" ".join(flags)}: exit 2, {last!r}')
     print(f'viewer API: {len(failures)} failure(s)')
     return 1 if failures else 0
 
