@@ -4,7 +4,7 @@
 // progressive requests (small and fast while moving, full size when the camera rests), a frame
 // slider, a person selector, snaps to the dataset cameras and the reference views.
 
-namespace th::view {
+namespace th::viewer {
 
 inline constexpr const char* kPage = R"HTML(<!doctype html>
 <html lang="en">
@@ -198,4 +198,4 @@ start().catch((e) => { $('status').textContent = 'error: ' + e.message; document
 </html>
 )HTML";
 
-}  // namespace th::view
+}  // namespace th::viewer
