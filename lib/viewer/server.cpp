@@ -101,19 +101,6 @@ std::string json_vec(const torch::Tensor& v) {
   return out.str();
 }
 
-std::string json_string(const std::string& text) {
-  std::string out = "\"";
-  for (const unsigned char ch : text) {
-    if (ch == '"' || ch == '\\') out += '\\', out += char(ch);
-    else if (ch < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", ch);
-      out += buf;
-    } else out += char(ch);
-  }
-  return out + "\"";
-}
-
 // (H, W, 3) float RGB in [0, 1], or (H, W) values in [0, 1] shown as grey, as PNG bytes.
 std::string png(const torch::Tensor& image) {
   auto u8 = (image.clamp(0, 1) * 255).round().to(torch::kUInt8).contiguous();
@@ -137,7 +124,7 @@ class Viewer {
     out << "{\"humans\":[";
     for (size_t h = 0; h < session_.dataset().humans().size(); ++h) {
       const auto& person = session_.human(int(h));
-      out << (h ? "," : "") << "{\"name\":" << json_string(person.name()) << ",\"cameras\":" << person.num_cameras()
+      out << (h ? "," : "") << "{\"name\":" << report::js_string(person.name()) << ",\"cameras\":" << person.num_cameras()
           << ",\"frames\":[";
       const auto frames = session_.setting_frames(int(h));
       for (size_t i = 0; i < frames.size(); ++i) out << (i ? "," : "") << frames[i];
@@ -187,7 +174,7 @@ class Viewer {
     const auto r = session_.evaluate_view(h, f, c);
     std::ostringstream out;
     out.precision(10);
-    out << "{\"human\":" << json_string(session_.human(h).name()) << ",\"frame\":" << f << ",\"view\":" << c
+    out << "{\"human\":" << report::js_string(session_.human(h).name()) << ",\"frame\":" << f << ",\"view\":" << c
         << ",\"psnr\":" << r.psnr << ",\"ssim\":" << r.ssim << "}";
     return out.str();
   }
