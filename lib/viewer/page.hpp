@@ -51,11 +51,14 @@ async function json(url) {
   return r.json();
 }
 
-// Asks for a view; `fast` while moving: a small image with few samples.
-async function request(fast) {
+// Asks for a view: 'fast' while moving (128 px, 16 samples), 'mid' first when the camera rests
+// on a large view (256 px, at most 32 samples), then 'full' (the view's size and samples).
+async function request(level) {
+  const fast = level === 'fast';
   const seq = ++state.seq;
   const [w0, h0] = state.size;
-  const scale = fast ? Math.min(1, 128 / Math.max(w0, h0)) : 1;
+  const side = { fast: 128, mid: 256, full: Infinity }[level];
+  const scale = Math.min(1, side / Math.max(w0, h0));
   const w = Math.max(8, Math.round(w0 * scale)), h = Math.max(8, Math.round(h0 * scale));
   const dir = new THREE.Vector3();
   camera.getWorldDirection(dir);
@@ -65,6 +68,7 @@ async function request(fast) {
     up: v(camera.up), fovy: camera.fov.toFixed(4), width: w, height: h, mode: $('mode').value, seq,
     client: state.client });
   if (fast) params.set('samples', 16);
+  if (level === 'mid') params.set('samples', Math.min(32, state.info.samples));
   const t0 = performance.now();
   const r = await fetch('api/render?' + params);
   if (r.status === 409) return;  // a newer request took over
@@ -79,17 +83,26 @@ async function request(fast) {
   img.src = URL.createObjectURL(blob);
   img.dataset.seq = seq;
   img.dataset.size = w + 'x' + h;
-  $('status').textContent = (fast ? 'moving' : 'refined') + ': ' + w + 'x' + h + ' in ' +
+  $('status').textContent = { fast: 'moving', mid: 'refining', full: 'refined' }[level] + ': ' + w + 'x' + h + ' in ' +
       Math.round(performance.now() - t0) + ' ms';
   document.body.dataset.rendered = String(Number(document.body.dataset.rendered || 0) + 1);
+}
+
+// Once the camera rests: a 256 px step first when the view is larger, then the full view (a
+// newer request cancels both).
+async function refine() {
+  const moves = state.moves;
+  if (Math.max(...state.size) > 256) await request('mid');
+  if (state.moves === moves) await request('full');  // not when the camera moved meanwhile
 }
 
 // While the camera moves: fast views; 250 ms after it rests: the refined one.
 function moved() {
   $('truth').hidden = true;
-  request(true);
+  state.moves = (state.moves || 0) + 1;
+  request('fast');
   clearTimeout(state.timer);
-  state.timer = setTimeout(() => request(false), 250);
+  state.timer = setTimeout(refine, 250);
 }
 
 function snap(c) {
@@ -108,7 +121,7 @@ function snap(c) {
   controls.addEventListener('change', moved);
   state.size = [cam.width, cam.height];
   $('stage').style.height = Math.round(512 * cam.height / cam.width) + 'px';
-  request(false);
+  refine();
   showTruth(c);
 }
 
@@ -165,8 +178,8 @@ async function start() {
     snap(Math.min(state.info.view, state.frame.cameras.length - 1));
   };
   sel.onchange = () => choose();
-  $('frame').oninput = async () => { await loadFrame(); request(false); };
-  $('mode').onchange = () => request(false);
+  $('frame').oninput = async () => { await loadFrame(); refine(); };
+  $('mode').onchange = () => refine();
   await choose(true);
 }
 // ?selftest=drag (for tests): once the first view is shown, drags the camera 120 px with
