@@ -13,11 +13,10 @@ fail. Exits 77 (CTest's skip code) without Chromium. Standard library only.
 import argparse
 import json
 import os
-import shutil
 import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from check_report_page import SKIP, chromium, find_chromium, run  # noqa: E402
+from check_report_page import SKIP, begin, chromium, run  # noqa: E402
 
 HOSTILE = "javascript:document.body.setAttribute('data-pwned','1');0"
 
@@ -47,13 +46,9 @@ def main():
     ap.add_argument('--bin', required=True, help='build/apps')
     ap.add_argument('--work', required=True, help='scratch folder (emptied)')
     args = ap.parse_args()
-    browser = find_chromium()
+    browser = begin(args.work)
     if not browser:
-        print('SKIP: Chromium is not installed (Debian: apt-get install chromium; scripts/install-deps.sh does)')
         return SKIP
-    shutil.rmtree(args.work, ignore_errors=True)
-    os.makedirs(args.work)
-    os.environ['TH_CHROMIUM_PROFILE'] = os.path.join(args.work, 'chromium-profile')
 
     # An evaluation folder by that name: what the page reads from it.
     evaluation = os.path.join(args.work, HOSTILE)

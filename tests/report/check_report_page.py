@@ -69,6 +69,19 @@ def find_chromium():
     return None
 
 
+def begin(work):
+    """Chromium's path with `work` emptied and its profile set up there; None (after saying so)
+    without Chromium."""
+    browser = find_chromium()
+    if not browser:
+        print('SKIP: Chromium is not installed (Debian: apt-get install chromium; scripts/install-deps.sh does)')
+        return None
+    shutil.rmtree(work, ignore_errors=True)
+    os.makedirs(work)
+    os.environ['TH_CHROMIUM_PROFILE'] = os.path.join(work, 'chromium-profile')
+    return browser
+
+
 def chromium(browser, url, extra, timeout=120):
     """Runs headless Chromium on `url`; returns (stdout, stderr, seconds)."""
     cmd = [browser, '--headless', '--no-sandbox', '--disable-gpu', '--use-angle=swiftshader',
@@ -233,14 +246,11 @@ def main():
     ap.add_argument('--data', required=True, help='the tiny synthetic dataset')
     ap.add_argument('--work', required=True, help='scratch folder (emptied)')
     args = ap.parse_args()
-    browser = find_chromium()
+    browser = begin(args.work)
     if not browser:
-        print('SKIP: Chromium is not installed (Debian: apt-get install chromium; scripts/install-deps.sh does)')
         return SKIP
-    shutil.rmtree(args.work, ignore_errors=True)
-    os.makedirs(os.path.join(args.work, 'shots'))
-    os.environ['TH_CHROMIUM_PROFILE'] = os.path.join(args.work, 'chromium-profile')
     shots = os.path.join(args.work, 'shots')
+    os.makedirs(shots)
     run_dir, b = os.path.join(args.work, 'run'), args.bin
     data = [f'data.root={args.data}', f'data.split_file={args.data}/split.yaml',
             f'model.grouping.cache_dir={os.path.dirname(args.data)}/kmeans_cache']
