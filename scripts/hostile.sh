@@ -456,6 +456,12 @@ cp -r "$work/e_good" "$work/e_badjson"
 printf '{"setting": "identity", "psnr": 20.' >"$work/e_badjson/summary.json"
 check "report of a cut-short summary.json" 2 "evaluation summary '$work/e_badjson/summary.json' is not JSON" \
   "$apps/transhuman-report" page --out "$work/rep_badjson" --eval "$work/e_badjson"
+printf '{"setting": "identity", "images": 1, "psnr": NaN, "ssim": 0.5, "lpips": null}\n' >"$work/e_badjson/summary.json"
+check "report of a summary.json with psnr NaN" 2 "'$work/e_badjson/summary.json': 'psnr' = 'NaN' is not a finite number (or null)" \
+  "$apps/transhuman-report" page --out "$work/rep_badjson" --eval "$work/e_badjson"
+: >"$work/e_badjson/summary.json"
+check "report of an empty summary.json" 2 "evaluation summary '$work/e_badjson/summary.json' is not a JSON object" \
+  "$apps/transhuman-report" page --out "$work/rep_badjson" --eval "$work/e_badjson"
 cp -r "$work/e_good" "$work/e_other"
 page_sum=$(sum_of "$work/e_other/index.html")
 check "report --out <another evaluation's folder>" 2 "'$work/e_other' is another evaluation's folder" \

@@ -16,6 +16,7 @@
 #include "core/error.hpp"
 #include "core/files.hpp"
 #include "eval/evaluator.hpp"
+#include "io/bytes.hpp"
 
 namespace th::report {
 namespace fs = std::filesystem;
@@ -45,7 +46,7 @@ std::string read_text(const fs::path& path, const std::string& what) {
 // An evaluation's summary.json, checked and written again as canonical JSON for the page: a
 // file the page's JSON.parse would reject (hand-edited, cut short) is refused here, by name,
 // rather than leaving a blank page. It must be a flat object holding at least the keys the page
-// reads; values are numbers, strings, booleans or null.
+// reads; values are numbers, strings, booleans or null (the scores: finite numbers or null).
 std::string read_summary(const fs::path& eval) {
   const fs::path path = eval / "summary.json";
   const std::string text = read_text(path, "evaluation summary");
@@ -70,6 +71,8 @@ std::string read_summary(const fs::path& eval) {
     if (!v.IsScalar()) fail("report: evaluation summary '", path.string(), "': '", key, "' is not a single value");
     const std::string value = v.Scalar();
     if (v.Tag() == "!") {  // quoted: a string
+      if (key == "images" || key == "psnr" || key == "ssim" || key == "lpips")
+        fail("report: evaluation summary '", path.string(), "': '", key, "' = \"", value, "\" is not a number");
       json += js_string(value);
       continue;
     }
@@ -79,6 +82,9 @@ std::string read_summary(const fs::path& eval) {
       char buf[40];
       std::snprintf(buf, sizeof buf, "%.17g", number);
       json += buf;
+    } else if (key == "images" || key == "psnr" || key == "ssim" || key == "lpips") {
+      fail("report: evaluation summary '", path.string(), "': '", key, "' = '", value,
+           "' is not a finite number (or null)");
     } else if (value == "true" || value == "false") {
       json += value;
     } else {
@@ -90,11 +96,8 @@ std::string read_summary(const fs::path& eval) {
   return json + "}";
 }
 
-void write_text(const fs::path& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary);
-  out << text;
-  if (!out) fail("report: cannot write '", path.string(), "'");
-}
+// Whole or not at all (a full disk leaves the previous file, and the error names this one).
+void write_text(const fs::path& path, const std::string& text) { io::detail::write_file_atomic(path, text); }
 
 std::string base64(const std::string& bytes) {
   static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
