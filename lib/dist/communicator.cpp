@@ -16,6 +16,7 @@
 #include <csignal>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <mutex>
 #include <thread>
 
@@ -45,6 +46,9 @@ bool is_loopback(const std::string& host) {
 }
 
 std::vector<uint8_t> bytes_of(const std::string& s) { return {s.begin(), s.end()}; }
+
+// The store key under which rank r announces its failure.
+std::string failure_key(int r) { return "failed/" + std::to_string(r); }
 
 }  // namespace
 
@@ -128,6 +132,15 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
          rank_ == 0 ? " (is the port free? did every rank start?)"
                     : " (is rank 0 running, and are MASTER_ADDR/MASTER_PORT its address?)");
   }
+  // Each rank joins once: a second process with the same RANK at this address (another run
+  // given the same MASTER_PORT, or a launcher that repeats a RANK) is refused before it can
+  // touch the process group of the run it found.
+  guarded("joining the run", [&] {
+    if (store_->add("joined/" + std::to_string(rank_), 1) > 1)
+      fail("rank ", rank_, " of the run at ", env.master_addr, ":", env.master_port,
+           " has joined already: another run uses this MASTER_PORT, or RANK=", rank_,
+           " was given to two processes (give each run its own port)");
+  });
   auto group_store = c10::make_intrusive<c10d::PrefixStore>("pg", store_);
   guarded("creating the " + backend_ + " process group", [&] {
     if (backend_ == "gloo") {
@@ -157,6 +170,13 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
 }
 
 Communicator::~Communicator() {
+  if (std::uncaught_exceptions() > 0) {  // (a constructor that threw runs no destructor)
+    try {
+      announce("rank " + std::to_string(rank_) + " stopped with an error (its own message is on its stderr)");
+    } catch (...) {
+      // the store is gone (rank 0 has exited): nobody is left to tell
+    }
+  }
   if (failed_) {
     // A collective failed: the group may still wait on a dead peer, and tearing it down could
     // block. The process is about to exit with the error; leave the objects to the OS.
@@ -260,6 +280,19 @@ void Communicator::average(const std::vector<torch::Tensor>& tensors, const std:
   });
 }
 
+void Communicator::announce(const std::string& message) {
+  if (!store_->check({failure_key(rank_)})) store_->set(failure_key(rank_), bytes_of(message));
+}
+
+void Communicator::sum_in_place(torch::Tensor& tensor, const std::string& what) {
+  guarded(what, [&] {
+    std::vector<torch::Tensor> t{to_comm(tensor.contiguous())};
+    group_->allreduce(t)->wait();
+    torch::NoGradGuard no_grad;
+    tensor.copy_(t[0]);
+  });
+}
+
 std::vector<double> Communicator::sum(const std::vector<double>& values, const std::string& what) {
   return guarded(what, [&] {
     std::vector<torch::Tensor> t{to_comm(torch::tensor(values, torch::kFloat64))};
@@ -336,6 +369,88 @@ void Communicator::on_lead(const std::function<void()>& fn, const std::string& w
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
   });
+}
+
+void Communicator::sharded(const std::vector<std::vector<int64_t>>& assignment,
+                           const std::function<std::string(int64_t)>& work,
+                           const std::function<void(int64_t, const std::string&)>& collect,
+                           const std::function<void()>& finish, const std::string& what) {
+  TORCH_CHECK(int(assignment.size()) == world_size_, "sharded: ", assignment.size(), " assignments for ",
+              world_size_, " ranks");
+  const std::string tag = "shard/" + std::to_string(shard_calls_++) + "/";
+  auto result_key = [&](int r, size_t j) { return tag + std::to_string(r) + "/" + std::to_string(j); };
+  const auto& mine = assignment[size_t(rank_)];
+  const auto timeout = std::chrono::duration<double>(timeout_s_);
+
+  if (rank_ == 0) {
+    on_lead(
+        [&] {
+          std::vector<size_t> received(size_t(world_size_), 0);
+          // One more result of rank r: true when one was collected; with `wait`, waits for it
+          // (up to the timeout).
+          auto receive = [&](int r, bool wait) {
+            const auto& items = assignment[size_t(r)];
+            if (received[size_t(r)] >= items.size()) return false;
+            const std::string key = result_key(r, received[size_t(r)]);
+            const auto since = Clock::now();
+            for (;;) {
+              if (store_->check({key})) {
+                const auto v = store_->get(key);
+                store_->deleteKey(key);
+                collect(items[received[size_t(r)]++], std::string(v.begin(), v.end()));
+                return true;
+              }
+              if (store_->check({failure_key(r)})) {
+                const auto v = store_->get(failure_key(r));
+                fail("rank ", r, " of ", world_size_, " failed during ", what, ": ", std::string(v.begin(), v.end()));
+              }
+              if (!wait) return false;
+              if (Clock::now() - since > timeout)
+                fail("rank ", r, " of ", world_size_, " sent no result of ", what, " for ", timeout_s_,
+                     " s: it died or hung (train.dist_timeout_s)");
+              std::this_thread::sleep_for(std::chrono::milliseconds(20));
+            }
+          };
+          for (const int64_t item : mine) {
+            collect(item, work(item));
+            for (int r = 1; r < world_size_; ++r)
+              while (receive(r, false)) {
+              }
+          }
+          for (int r = 1; r < world_size_; ++r)
+            while (receive(r, true)) {
+            }
+          finish();
+        },
+        what);
+    barrier("the end of " + what);  // the others have read the outcome before rank 0 exits
+    return;
+  }
+
+  // The on_lead call rank 0 makes for this work: its status tells whether rank 0 gave up.
+  const std::string lead_done = "lead/" + std::to_string(lead_calls_) + "/done";
+  try {
+    for (size_t j = 0; j < mine.size(); ++j) {
+      const std::string bytes = work(mine[j]);
+      guarded("sending a result of " + what, [&] {
+        if (store_->check({lead_done})) {
+          const auto v = store_->get(lead_done);
+          const std::string status(v.begin(), v.end());
+          if (status != "ok") fail("rank 0 failed during ", what, ": ", status.substr(7));
+        }
+        store_->set(result_key(rank_, j), bytes_of(bytes));
+      });
+    }
+  } catch (const std::exception& e) {
+    try {
+      announce(message_of(e));
+    } catch (const std::exception&) {
+      // rank 0 is gone: this rank's own error is what is reported
+    }
+    throw;
+  }
+  on_lead([] {}, what);
+  barrier("the end of " + what);
 }
 
 }  // namespace th::dist

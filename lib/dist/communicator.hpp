@@ -68,6 +68,10 @@ class Communicator {
   // statistics, so every rank holds the same buffers).
   void average(const std::vector<torch::Tensor>& tensors, const std::string& what);
 
+  // The element-wise sum over the ranks of a tensor, in place (synchronised BatchNorm's
+  // statistics).
+  void sum_in_place(torch::Tensor& tensor, const std::string& what);
+
   // The element-wise sum over the ranks of a few numbers (loss statistics, flags).
   std::vector<double> sum(const std::vector<double>& values, const std::string& what);
 
@@ -77,6 +81,22 @@ class Communicator {
   // sends a heartbeat meanwhile, so `fn` may take longer than the timeout; the others give up
   // with an error when rank 0 dies, stops beating for the timeout, or `fn` throws there.
   void on_lead(const std::function<void()>& fn, const std::string& what);
+
+  // Work split over the ranks: `assignment[r]` lists rank r's items. Every rank calls `work` on
+  // its own items in that order; rank 0 receives every result and calls `collect(item, bytes)`
+  // for each (its own at once, the others' as they arrive), then `finish` (which writes the
+  // outputs). A rank whose `work` throws sends its error, and every rank exits naming it; a rank
+  // that dies or sends nothing for the timeout is named by rank 0, whose failure reaches the
+  // others (on_lead). Results travel through the rendezvous store, one item at a time.
+  void sharded(const std::vector<std::vector<int64_t>>& assignment,
+               const std::function<std::string(int64_t)>& work,
+               const std::function<void(int64_t, const std::string&)>& collect,
+               const std::function<void()>& finish, const std::string& what);
+
+  // Records this rank's failure in the store, where rank 0 waiting in `sharded` finds it and
+  // stops at once, naming it, instead of waiting out the timeout; the first message stays. The
+  // destructor announces one when it runs during an exception (an error anywhere after joining).
+  void announce(const std::string& message);
 
   // Seconds spent in the gradient all-reduce (flatten, reduce, unflatten), in all and in the last
   // call.
@@ -95,7 +115,8 @@ class Communicator {
   c10::intrusive_ptr<c10d::Store> store_;
   c10::intrusive_ptr<compat::CollectiveGroup> group_;  // Gloo or NCCL
   bool failed_ = false;     // after a failed collective the group is left alone (not torn down)
-  int64_t lead_calls_ = 0;  // on_lead sequence number (store keys)
+  int64_t lead_calls_ = 0;   // on_lead sequence number (store keys)
+  int64_t shard_calls_ = 0;  // sharded sequence number (store keys)
   double allreduce_total_ = 0, allreduce_last_ = 0;
 };
 
