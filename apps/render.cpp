@@ -1,22 +1,26 @@
-// transhuman-render: free-viewpoint video of a person from a trained checkpoint (SPEC 7).
+// transhuman-render: free-viewpoint video of a person from a trained checkpoint (METHOD 7), in one
+// process or over several ranks (--nproc N, or a launcher's environment): frames split, rank 0
+// writes them.
 #include <spdlog/spdlog.h>
 
 #include <iostream>
 
 #include "app/app.hpp"
+#include "app/ranks.hpp"
 #include "app/summary.hpp"
 #include "inference/free_view.hpp"
 
 int main(int argc, char** argv) {
-  return th::app::guarded_main("transhuman-render", [&]() -> int {
+  return th::app::guarded_main(th::app::rank_app_name("transhuman-render"), [&]() -> int {
     CLI::App cli{"Render free-viewpoint video of a person with a trained TransHuman checkpoint.\n"
-                 "Cameras: the orbit of SPEC 7 (default, 36 views), a camera path file (--path) or\n"
+                 "Cameras: the orbit of METHOD 7 (default, 36 views), a camera path file (--path) or\n"
                  "one dataset camera (--camera). Writes frames/*.png, video.mp4 (30 fps),\n"
                  "cameras.yaml and contact_sheet.png into --out; rerunning resumes."};
     th::app::CommonOptions options;
     th::inference::VideoRequest request;
     th::app::ModelOptions model;
     std::string frames;
+    int nproc = 0;
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
     th::app::add_precision_option(cli, options);
@@ -28,7 +32,7 @@ int main(int argc, char** argv) {
     auto* camera = cli.add_option("--camera", request.camera, "render from this dataset camera");
     orbit->excludes(path)->excludes(camera);
     path->excludes(camera);
-    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (SPEC 7: 3)")
+    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (METHOD 7: 3)")
         ->check(th::app::at_least(0));
     cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)")
         ->check(th::app::at_least(1));
@@ -36,6 +40,7 @@ int main(int argc, char** argv) {
     th::app::add_force_option(cli, options,
                               "replace what --out holds: frames of an earlier, different request, or another "
                               "command's outputs");
+    th::app::add_nproc_option(cli, nproc, "split the frames");
     options.own_outputs = {"config.yaml", "log.txt", "frames", "request.yaml", "cameras.yaml", "video.mp4",
                            "contact_sheet.png"};
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
@@ -46,8 +51,12 @@ int main(int argc, char** argv) {
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;
     if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;
 
-    const auto ctx = th::app::start_run(options, "transhuman-render", "runs/render");
-    th::app::print_summary(ctx, options.dry_run, model.checkpoint);
+    if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-render", "runs/render"))
+      return *code;
+    const auto role = th::app::rank_role(options);
+    const auto ctx = th::app::start_run(options, "transhuman-render", role.lead ? "runs/render" : "");
+    th::app::share_cores(role, ctx);
+    if (role.lead) th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     if (options.dry_run) {  // the request too: person, frames, cameras, path file, memory
       const auto plan = th::inference::plan_video(session, request);
@@ -55,7 +64,9 @@ int main(int argc, char** argv) {
                    plan.frames.size(), plan.frames.size() > 1 ? "s" : "", plan.width, plan.height);
       return 0;
     }
-    const auto s = th::inference::render_video(session, request, ctx.run_dir);
+    const auto comm = th::app::join_ranks(role, ctx);
+    const auto s = th::inference::render_video(session, request, ctx.run_dir, comm.get());
+    if (!role.lead) return 0;
     spdlog::info("{} frames ({} rendered, {} resumed), {:.2f} s/frame, in {}", s.frames, s.rendered,
                  s.skipped, s.seconds_per_frame, s.frames_dir.string());
     if (s.video_written) spdlog::info("{}", s.video_message);

@@ -1,5 +1,5 @@
 #pragma once
-// transhuman-eval's protocol (SPEC 6): every target view of a test setting rendered with fixed
+// transhuman-eval's protocol (METHOD 6): every target view of a test setting rendered with fixed
 // references, progressive rendering, PSNR / SSIM / LPIPS per image; per-image CSV, summary JSON,
 // a markdown table, and for each image a panel (prediction, ground truth, inputs, error map).
 
@@ -10,6 +10,10 @@
 #include <vector>
 
 #include "core/config.hpp"
+
+namespace th::dist {
+class Communicator;
+}
 
 namespace th::eval {
 
@@ -36,8 +40,23 @@ struct EvalSummary {
 
 // Evaluates `checkpoint` (ours or a reference .pth) on config.eval.setting, writing results to
 // `out_dir`. config.eval.limit > 0 evaluates only the first images.
+//
+// With `comm` (several ranks), the views are split over the ranks by frame (the views of a
+// frame share its preparation), balanced by estimated cost (shard_views); rank 0 receives every
+// score and panel and writes exactly what one process writes, rows in the same order, and
+// returns the summary; the other ranks write nothing and return their own rows only. A rank
+// that fails or stops answering makes every rank fail, naming it, before anything but panels
+// is written.
 EvalSummary evaluate(const Config& config, const torch::Device& device,
-                     const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir);
+                     const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir,
+                     dist::Communicator* comm = nullptr);
+
+// Which of a setting's first `n` items each of `ranks` ranks evaluates: the items of one
+// (person, frame) stay together when `reuse_frames` (their preparation is shared), each frame
+// costing its views plus a preparation of a quarter view; whole frames go largest first to the
+// least loaded rank.
+std::vector<std::vector<int64_t>> shard_views(const std::vector<std::pair<int, int>>& item_frames,
+                                              bool reuse_frames, int ranks);
 
 // The file name of an image's panel in <out_dir>/images: "<human>_f<frame:04>_v<view:02>.png".
 std::string panel_file_name(const std::string& human, int frame, int view);

@@ -6,11 +6,14 @@
 
 #include <chrono>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "core/error.hpp"
 #include "core/resources.hpp"
 #include "core/progress.hpp"
+#include "dist/communicator.hpp"
+#include "dist/shard.hpp"
 #include "io/bytes.hpp"
 #include "video/contact_sheet.hpp"
 #include "video/frame_writer.hpp"
@@ -160,7 +163,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   return plan;
 }
 
-VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir) {
+VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir,
+                          dist::Communicator* comm) {
   VideoPlan plan = plan_video(session, request);
   const int h = plan.human, base_view = plan.base_view, width = plan.width, height = plan.height,
             count = plan.count;
@@ -168,58 +172,99 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
   const auto& shots = plan.shots;
   const auto& human = session.human(h);
   PreparedFrame& prepared = plan.prepared;
+  const bool writes = !out_dir.empty();
+  const fs::path frames_dir = out_dir / "frames";
 
-  // Resume only what the same request wrote.
-  fs::create_directories(out_dir);
-  const fs::path frames_dir = out_dir / "frames", request_file = out_dir / "request.yaml";
-  const std::string wanted =
-      describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
-  if (fs::exists(request_file) && io::detail::read_file(request_file) != wanted) {
-    if (!request.force)
-      fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
-           "); use another --out or --force to replace them");
-    fs::remove_all(frames_dir);
-  }
-  io::detail::write_file_atomic(request_file, wanted);
-  video::write_camera_path(out_dir / "cameras.yaml", {shots, width, height});
-
-  video::FrameWriterOptions wo;
-  wo.dir = frames_dir;
-  wo.video_name = "../video.mp4";
-  video::FrameWriter writer(wo);
+  // Resume only what the same request wrote (rank 0, or the only process, owns the folder).
+  std::optional<video::FrameWriter> writer;
+  std::vector<int64_t> todo;  // video frames still to render
   VideoSummary summary;
   summary.frames = count;
   summary.frames_dir = frames_dir;
-  summary.skipped = count - writer.missing(count);
-  spdlog::info("video: {} frames of {} ({} body frame{}), {}x{}{}", count, human.name(), frames.size(),
-               frames.size() > 1 ? "s" : "", width, height,
-               summary.skipped ? fmt::format(", {} already written (resumed)", summary.skipped) : "");
+  if (writes) {
+    fs::create_directories(out_dir);
+    const fs::path request_file = out_dir / "request.yaml";
+    const std::string wanted =
+        describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
+    if (fs::exists(request_file) && io::detail::read_file(request_file) != wanted) {
+      if (!request.force)
+        fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
+             "); use another --out or --force to replace them");
+      fs::remove_all(frames_dir);
+    }
+    io::detail::write_file_atomic(request_file, wanted);
+    video::write_camera_path(out_dir / "cameras.yaml", {shots, width, height});
+    video::FrameWriterOptions wo;
+    wo.dir = frames_dir;
+    wo.video_name = "../video.mp4";
+    writer.emplace(wo);
+    for (int k = 0; k < count; ++k)
+      if (!writer->has_frame(k)) todo.push_back(k);
+    summary.skipped = count - int(todo.size());
+    spdlog::info("video: {} frames of {} ({} body frame{}), {}x{}{}", count, human.name(), frames.size(),
+                 frames.size() > 1 ? "s" : "", width, height,
+                 summary.skipped ? fmt::format(", {} already written (resumed)", summary.skipped) : "");
+  }
+  // Which frames are left is rank 0's to say; each rank then takes every ranks-th of them.
+  std::vector<std::vector<int64_t>> assignment{todo};
+  if (comm) {
+    dist::Record list;
+    list.put(int64_t(todo.size()));
+    for (const int64_t k : todo) list.put(k);
+    std::string bytes = list.bytes();
+    comm->broadcast(bytes, "the frames left to render");
+    dist::Record received(bytes);
+    todo.assign(size_t(received.int64("frame count")), 0);
+    for (auto& k : todo) k = received.int64("frame");
+    std::vector<std::vector<int64_t>> single;
+    for (const int64_t k : todo) single.push_back({k});
+    assignment = dist::balance(single, std::vector<double>(single.size(), 1.0), comm->world_size());
+    if (comm->rank() == 0)
+      spdlog::info("video: {} frames to render over {} ranks", todo.size(), comm->world_size());
+  }
 
-  Progress progress("render", count - summary.skipped, "frame");
+  Progress progress("render", comm && comm->rank() != 0 ? int64_t(assignment[size_t(comm->rank())].size())
+                                                         : int64_t(todo.size()), "frame");
   double render_seconds = 0;
-  for (int k = 0; k < count; ++k) {
-    if (writer.has_frame(k)) continue;
+  auto work = [&](int64_t k) {
     const int frame = frames[size_t(k) % frames.size()];
     const auto t0 = std::chrono::steady_clock::now();
     if (prepared.frame != frame) prepared = session.prepare(h, frame, base_view);
-    writer.write_frame(k, session.render(prepared, shots[size_t(k)], width, height));
-    render_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const auto image = session.render(prepared, shots[size_t(k)], width, height);
+    dist::Record rec;
+    rec.put(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    rec.put(video::encode_png(video::to_bgr8(image), "video frame " + std::to_string(k)));
+    return rec.bytes();
+  };
+  auto collect = [&](int64_t k, const std::string& bytes) {
+    dist::Record rec(bytes);
+    render_seconds += rec.number("seconds");
+    const std::string png = rec.text("frame");
+    if (writer) io::detail::write_file_atomic(writer->frame_path(int(k)), png);
     ++summary.rendered;
-    progress.advance(1, "frame " + std::to_string(k) + " body " + std::to_string(frame));
-  }
-  progress.finish();
-  summary.seconds_per_frame = summary.rendered ? render_seconds / summary.rendered : 0.0;
-
-  const auto video = writer.write_video(count);
-  summary.video_written = video.written;
-  summary.video_message = video.message;
-  if (request.contact_sheet_frames > 0) {
-    std::vector<fs::path> paths;
-    for (int k = 0; k < count; ++k) paths.push_back(writer.frame_path(k));
-    const int columns = std::min(6, std::min(count, request.contact_sheet_frames));
-    summary.contact_sheet = out_dir / "contact_sheet.png";
-    video::write_png(summary.contact_sheet,
-                     video::contact_sheet(paths, request.contact_sheet_frames, columns, std::min(width, 256)));
+    progress.advance(1, "frame " + std::to_string(k) + " body " + std::to_string(frames[size_t(k) % frames.size()]));
+  };
+  auto finish = [&] {
+    progress.finish();
+    summary.seconds_per_frame = summary.rendered ? render_seconds / summary.rendered : 0.0;
+    if (!writer) return;
+    const auto video = writer->write_video(count);
+    summary.video_written = video.written;
+    summary.video_message = video.message;
+    if (request.contact_sheet_frames > 0) {
+      std::vector<fs::path> paths;
+      for (int k = 0; k < count; ++k) paths.push_back(writer->frame_path(k));
+      const int columns = std::min(6, std::min(count, request.contact_sheet_frames));
+      summary.contact_sheet = out_dir / "contact_sheet.png";
+      video::write_png(summary.contact_sheet,
+                       video::contact_sheet(paths, request.contact_sheet_frames, columns, std::min(width, 256)));
+    }
+  };
+  if (comm) {
+    comm->sharded(assignment, work, collect, finish, "rendering the video");
+  } else {
+    for (const int64_t k : todo) collect(k, work(k));
+    finish();
   }
   return summary;
 }

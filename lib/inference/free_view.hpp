@@ -1,7 +1,7 @@
 #pragma once
-// Free-viewpoint video (SPEC 7): a trained model renders one person from a moving virtual
+// Free-viewpoint video (METHOD 7): a trained model renders one person from a moving virtual
 // camera, for one frame or a frame range (the person moving while the camera orbits), with
-// the setting's fixed reference views. Cameras: the orbit of SPEC 7, a camera path file
+// the setting's fixed reference views. Cameras: the orbit of METHOD 7, a camera path file
 // (video/camera_path.hpp), or one dataset camera. Output: PNG frames, an mp4 at 30 fps, the
 // camera path as a file, a contact sheet. Resumable: frames already written are skipped, as
 // long as the request (checkpoint included) is the same one (request.yaml in the output folder
@@ -13,6 +13,10 @@
 
 #include "inference/session.hpp"
 
+namespace th::dist {
+class Communicator;
+}
+
 namespace th::inference {
 
 struct VideoRequest {
@@ -22,7 +26,7 @@ struct VideoRequest {
   int orbit_views = 0;               // orbit cameras; 0: 36, or one per frame of a frame range
   std::filesystem::path path_file;   // Cameras::PathFile
   int camera = 0;                    // Cameras::Dataset: camera index
-  int view = 3;                      // the orbit's intrinsics and image size (SPEC 7: view 3)
+  int view = 3;                      // the orbit's intrinsics and image size (METHOD 7: view 3)
   int width = 0, height = 0;         // output size; 0: the view's image at data.ratio (K scaled)
   bool force = false;                // discard frames of an earlier, different request
   int contact_sheet_frames = 12;     // 0: no contact sheet
@@ -59,8 +63,12 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request);
 // max(F, C) frames. The orbit looks at the centre of each frame's body box. Throws th::Error
 // for a bad request (unknown person, frame or camera out of range, unreadable path file, an
 // output folder holding another request's frames without `force`).
+//
+// With `comm` (several ranks), the frames still to render are split over the ranks; rank 0
+// (whose `out_dir` is the output folder: the others pass an empty one and write nothing)
+// receives every frame and writes what one process writes: frames, video, contact sheet.
 VideoSummary render_video(const Session& session, const VideoRequest& request,
-                          const std::filesystem::path& out_dir);
+                          const std::filesystem::path& out_dir, dist::Communicator* comm = nullptr);
 
 // The most frames (and cameras) one video may have: an hour at 30 fps.
 constexpr int64_t kMaxVideoFrames = 108000;

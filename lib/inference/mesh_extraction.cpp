@@ -22,7 +22,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr int kPad = 10;  // zero cells around the grid (SPEC 7)
+constexpr int kPad = 10;  // zero cells around the grid (METHOD 7)
 
 resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest& request, const Session& session,
                                   const PreparedFrame& prepared) {
@@ -84,7 +84,7 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   const auto& human = session.human(plan.human);
   const PreparedFrame& prepared = plan.prepared;
 
-  // Density grid over the frame's box, a z-slab at a time into marching cubes (SPEC 7).
+  // Density grid over the frame's box, a z-slab at a time into marching cubes (METHOD 7).
   const auto bounds = prepared.sample.body.bounds.to(torch::kFloat64).reshape({2, 3});
   const auto grid = mesh::grid_over_bounds(bounds, request.voxel);
   const int64_t plane = grid.height * grid.width;

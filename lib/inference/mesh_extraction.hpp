@@ -1,5 +1,5 @@
 #pragma once
-// Mesh extraction (SPEC 7): the network's raw density on a grid over the frame's box (5 mm by
+// Mesh extraction (METHOD 7): the network's raw density on a grid over the frame's box (5 mm by
 // default), zero farther than the culling distance from the body, marching cubes at a
 // threshold (20) with 10 cells of zero padding, vertices in world coordinates, a binary PLY,
 // optional vertex colours from the colour branch looking along the vertex normal, and a

@@ -1,5 +1,5 @@
 #pragma once
-// A trained model ready to be used outside the training loop (SPEC 7): the body model, a
+// A trained model ready to be used outside the training loop (METHOD 7): the body model, a
 // dataset setting (its people, fixed reference views and cameras) and the network with its
 // weights. Prepares one frame of one person at a time and answers what free-viewpoint video
 // and mesh extraction ask of it: an image from any pinhole camera, densities, colours.
@@ -52,7 +52,7 @@ class Session {
   torch::Tensor body_center(int human, int frame) const;
 
   // Prepares frame `frame` (index into the person's annots) with the setting's reference
-  // views; `view` is the camera whose intrinsics and image size the output camera takes (SPEC
+  // views; `view` is the camera whose intrinsics and image size the output camera takes (METHOD
   // 7: target view 3). Throws th::Error for an out-of-range index.
   PreparedFrame prepare(int human, int frame, int view) const;
 
@@ -89,7 +89,7 @@ class Session {
   resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height, int frames) const;
 
   // Raw density sigma_raw of world points (N, 3): 0 for points farther than
-  // render.cull_distance from the body (SPEC 7), the network elsewhere, in chunks of
+  // render.cull_distance from the body (METHOD 7), the network elsewhere, in chunks of
   // render.chunk_points. (N) float32 CPU.
   torch::Tensor density(const PreparedFrame& frame, const torch::Tensor& pts) const;
 

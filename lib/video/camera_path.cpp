@@ -45,7 +45,7 @@ Orbit make_orbit(const torch::Tensor& R, const torch::Tensor& T) {
 
   Orbit orbit;
   orbit.center = centres.mean(0);
-  // SPEC 7's up: the reference's LLFF x axis = OpenCV's y axis = row 1 of R.
+  // METHOD 7's up: the reference's LLFF x axis = OpenCV's y axis = row 1 of R.
   auto up_sum = r.select(1, 1).sum(0);
   if (up_sum.norm().item<double>() < 1e-9)
     fail("orbit: the cameras' y axes cancel out, no up direction for the orbit");
@@ -204,7 +204,7 @@ void write_camera_path(const std::filesystem::path& path, const CameraPath& came
   YAML::Emitter emitter;
   emitter.SetDoublePrecision(17);  // round-trips float64 exactly
   emitter << root;
-  std::string text = "# x_cam = R x_world + T (SPEC 2.2); T in metres; one camera per frame\n";
+  std::string text = "# x_cam = R x_world + T (METHOD 2.2); T in metres; one camera per frame\n";
   text += emitter.c_str();
   text += "\n";
   io::detail::write_file_atomic(path, text);

@@ -1,12 +1,12 @@
 #pragma once
-// Camera paths for free-viewpoint video (SPEC 7): the orbit around the person, a path file
+// Camera paths for free-viewpoint video (METHOD 7): the orbit around the person, a path file
 // the user writes, or one dataset camera.
 //
-// Axis conventions. Cameras are OpenCV's (SPEC 2.2): x_cam = R x_world + T, x right, y down,
+// Axis conventions. Cameras are OpenCV's (METHOD 2.2): x_cam = R x_world + T, x right, y down,
 // z forward, so the rows of R are the camera's x, y and z axes in world coordinates and the
 // centre is -R^T T. The reference implementation inverts [R|T] to camera-to-world and reorders
 // its columns to LLFF's [down, right, backwards] = [y, x, -z] before building the orbit. So
-// "the sum of the cameras' x axes in the reference code's axis order" (SPEC 7) is the sum of
+// "the sum of the cameras' x axes in the reference code's axis order" (METHOD 7) is the sum of
 // row 1 of each R: the OpenCV y axes, which point DOWN in the images. The orbit cameras it
 // produces have the same rows as look_at(eye, target, -up) gives here (derivation in
 // camera_path.cpp), so the person stands upright in the video.
@@ -27,7 +27,7 @@ struct PathCamera {
   torch::Tensor T;
 };
 
-// The ellipse the orbit camera moves on, derived from the dataset cameras (SPEC 7).
+// The ellipse the orbit camera moves on, derived from the dataset cameras (METHOD 7).
 struct Orbit {
   torch::Tensor center;  // (3) mean of the camera centres
   torch::Tensor up;      // (3) unit, normalised sum of the cameras' y axes (points image-down)
@@ -43,7 +43,7 @@ Orbit make_orbit(const torch::Tensor& R, const torch::Tensor& T);
 
 // The camera at angle theta: eye = center + radii[1] sin(theta) a1 + radii[2] cos(theta) a2
 // (the reference's [0, sin, cos] * rads), looking at `target` (3) world (the person: body
-// centre) with -up pointing up in the image. K: (3, 3) intrinsics of the output image (SPEC 7:
+// centre) with -up pointing up in the image. K: (3, 3) intrinsics of the output image (METHOD 7:
 // those of target view 3, scaled like the rendered images).
 PathCamera orbit_camera(const Orbit& orbit, const torch::Tensor& K, const torch::Tensor& target,
                         double theta);

@@ -47,13 +47,15 @@ cv::Mat to_bgr8(const torch::Tensor& rgb) {
       .clone();
 }
 
-void write_png(const std::filesystem::path& path, const cv::Mat& image) {
+std::string encode_png(const cv::Mat& image, const std::string& what) {
   std::vector<uchar> bytes;
   if (image.empty() || !cv::imencode(".png", image, bytes))
-    fail("cannot encode '", path.string(), "' as PNG (", image.cols, "x", image.rows, ", type ",
-         image.type(), ")");
-  io::detail::write_file_atomic(
-      path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+    fail("cannot encode ", what, " as PNG (", image.cols, "x", image.rows, ", type ", image.type(), ")");
+  return std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+}
+
+void write_png(const std::filesystem::path& path, const cv::Mat& image) {
+  io::detail::write_file_atomic(path, encode_png(image, "'" + path.string() + "'"));
 }
 
 FrameWriter::FrameWriter(FrameWriterOptions options) : options_(std::move(options)) {

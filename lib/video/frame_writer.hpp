@@ -1,5 +1,5 @@
 #pragma once
-// Free-viewpoint video output (SPEC 7: frames -> PNG and an mp4 at 30 fps).
+// Free-viewpoint video output (METHOD 7: frames -> PNG and an mp4 at 30 fps).
 //
 // Resumable: frames are written atomically (temporary file + rename), so a frame file that
 // exists is complete and an interrupted run can skip it (has_frame). The mp4 is assembled from
@@ -17,7 +17,7 @@ struct FrameWriterOptions {
   std::filesystem::path dir;      // created if missing
   std::string prefix = "frame_";  // frames are <prefix>%04d.png
   std::string video_name = "video.mp4";
-  double fps = 30.0;            // SPEC 7
+  double fps = 30.0;            // METHOD 7
   std::string fourcc = "mp4v";  // MPEG-4 part 2: what OpenCV's FFmpeg backend writes
 };
 
@@ -61,5 +61,7 @@ cv::Mat to_bgr8(const torch::Tensor& rgb);
 
 // Writes an image as PNG atomically. Throws th::Error naming the path.
 void write_png(const std::filesystem::path& path, const cv::Mat& image);
+// An image's PNG bytes; throws th::Error naming `what` when it cannot be encoded.
+std::string encode_png(const cv::Mat& image, const std::string& what);
 
 }  // namespace th::video
