@@ -1,5 +1,5 @@
 #pragma once
-// The option tree of TransHuman-C++ with the defaults of SPEC.md. configs/default.yaml states
+// The option tree of TransHuman-C++ with the defaults of docs/METHOD.md. configs/default.yaml states
 // the same values; a test checks that the two agree. Each module receives the section it needs.
 
 #include <cstdint>
@@ -10,7 +10,7 @@
 
 namespace th {
 
-// ---- data (SPEC 1, 2.1, 5) --------------------------------------------------------------
+// ---- data (METHOD 1, 2.1, 5) --------------------------------------------------------------
 struct PatchConfig {
   int count = 6;            // patches per target image
   int size = 20;            // side in pixels
@@ -40,7 +40,7 @@ struct DataConfig {
   // Calibration that cannot be right (intrinsics, rotations, the body out of a reference view or
   // at an implausible distance; data/calibration.hpp): an error, or a warning.
   std::string calibration_check = "error";       // error | warn
-  // Target mask border band (SPEC 2.1 step 6): marked on the distorted mask before undistortion
+  // Target mask border band (METHOD 2.1 step 6): marked on the distorted mask before undistortion
   // [parity], or on the undistorted one.
   std::string border_band = "distorted";         // distorted | undistorted
   PatchConfig patch;
@@ -49,11 +49,11 @@ struct DataConfig {
   int prefetch = 4;                              // samples queued ahead
 };
 
-// ---- model (SPEC 2.5, 3) -----------------------------------------------------------------
+// ---- model (METHOD 2.5, 3) -----------------------------------------------------------------
 struct EncoderConfig {
   std::string pretrained = "";        // ResNet-18 weights file from scripts/export_pretrained.py
   std::string batchnorm = "batch";    // batch [parity] | running
-  bool fast_sampling = true;          // SPEC 3.1/9: sample low-res maps, no (V,384,H,W) tensor
+  bool fast_sampling = true;          // METHOD 3.1/9: sample low-res maps, no (V,384,H,W) tensor
 };
 
 struct GroupingConfig {
@@ -75,7 +75,7 @@ struct TransHEConfig {
   int pe_freqs = 32;
   double pe_scale = 1.5;           // Pc = mean(v_template[c]) / pe_scale
   // float32 sin(x * f + phase): "fused" rounds once, as the reference's torch.addcmul (FMA)
-  // [parity, SPEC 3.2]; "separate" rounds the product and the sum (numpy's evaluation).
+  // [parity, METHOD 3.2]; "separate" rounds the product and the sum (numpy's evaluation).
   std::string pe_rounding = "fused";
 };
 
@@ -106,22 +106,22 @@ struct ModelConfig {
   DPaRFConfig dparf;
   FDIConfig fdi;
   SPCConfig spc;
-  // SPEC 9 identities (per-level readouts of p_v, fc_0 on the tokens, folded linear layers);
+  // METHOD 9 identities (per-level readouts of p_v, fc_0 on the tokens, folded linear layers);
   // false: the reference's direct computation (slower; for checking).
   bool exact_shortcuts = true;
-  // SPEC 9 readout windows (with exact_shortcuts, inference on CPU): the readouts at full
+  // METHOD 9 readout windows (with exact_shortcuts, inference on CPU): the readouts at full
   // resolution on a rectangle of each view around the body; false: per-level tables.
   bool readout_windows = true;
 };
 
-// ---- rendering (SPEC 4) ------------------------------------------------------------------
+// ---- rendering (METHOD 4) ------------------------------------------------------------------
 struct RenderConfig {
   int samples = 64;              // per ray (16: the paper's fast variant)
   bool progressive = true;       // inference: distance culling, colour only where sigma > 0
   double cull_distance = 0.1;    // metres from the nearest body vertex
   int64_t chunk_points = 4096;  // per-point work in chunks of this many points (bench/results/model.md)
   // Progressive rendering marches each ray front to back and stops once its transmittance is
-  // below this bound: the samples it skips change rgb and acc by at most the bound (SPEC 4 note
+  // below this bound: the samples it skips change rgb and acc by at most the bound (METHOD 4 note
   // in render/progressive.hpp). 0: every kept sample is evaluated (the exact render).
   double termination_transmittance = 1e-4;
   // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
@@ -134,7 +134,7 @@ struct RenderConfig {
   std::string train_recompute = "auto";
 };
 
-// ---- training (SPEC 5) -------------------------------------------------------------------
+// ---- training (METHOD 5) -------------------------------------------------------------------
 struct TrainConfig {
   int epochs = 3000;
   int iters_per_epoch = 500;
@@ -158,9 +158,13 @@ struct TrainConfig {
   std::string dist_backend = "auto";  // auto (nccl on CUDA when built in, else gloo) | gloo | nccl
   double dist_timeout_s = 300;
   double dist_bucket_mb = 25;
+  // With several ranks, the encoder's BatchNorm normalises over every rank's images together
+  // (statistics summed over the ranks, forward and backward) [parity: the reference trains
+  // with SyncBatchNorm]; false: each rank's own images.
+  bool sync_batchnorm = true;
 };
 
-// ---- evaluation (SPEC 6) -----------------------------------------------------------------
+// ---- evaluation (METHOD 6) -----------------------------------------------------------------
 struct EvalConfig {
   std::string setting = "identity";
   std::string lpips_weights = "";
@@ -306,6 +310,7 @@ template <class V> void visit_fields(V& v, TrainConfig& c) {
   v.choice("dist_backend", c.dist_backend, {"auto", "gloo", "nccl"});
   v("dist_timeout_s", c.dist_timeout_s);
   v("dist_bucket_mb", c.dist_bucket_mb);
+  v("sync_batchnorm", c.sync_batchnorm);
 }
 template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("setting", c.setting);

@@ -43,6 +43,76 @@ BatchNormImpl::BatchNormImpl(int64_t channels, bool batch_stats)
   num_batches_tracked = register_buffer("num_batches_tracked", torch::zeros({}, torch::kLong));
 }
 
+namespace {
+
+// Per-channel sums over (N, H, W) of a (N, C, H, W) tensor, in float64.
+torch::Tensor channel_sums(const torch::Tensor& t) { return t.sum({0, 2, 3}, false, torch::kFloat64); }
+
+// Batch normalisation over the images of every rank (see BatchNormImpl). Statistics and their
+// sums are float64, the output has x's type.
+struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x,
+                               const torch::Tensor& weight, const torch::Tensor& bias,
+                               torch::Tensor running_mean, torch::Tensor running_var,
+                               const StatsReducer* reduce, double momentum, double eps) {
+    TORCH_CHECK(x.dim() == 4, "synchronised BatchNorm expects (N, C, H, W), got ", x.sizes());
+    const int64_t C = x.size(1);
+    const auto xd = x.to(torch::kFloat64);
+    auto stats = torch::cat({channel_sums(xd), channel_sums(xd * xd),
+                             torch::full({1}, double(x.numel() / C), torch::kFloat64)});
+    (*reduce)(stats);
+    const double count = stats[2 * C].item<double>();
+    TORCH_CHECK(count > 1, "synchronised BatchNorm over ", count, " values per channel");
+    const auto mean = stats.slice(0, 0, C) / count;
+    const auto var = (stats.slice(0, C, 2 * C) / count - mean * mean).clamp_min(0);
+    const auto invstd = (var + eps).rsqrt();
+    {
+      torch::NoGradGuard no_grad;
+      running_mean.mul_(1 - momentum).add_(mean.to(running_mean.scalar_type()), momentum);
+      running_var.mul_(1 - momentum).add_((var * (count / (count - 1))).to(running_var.scalar_type()), momentum);
+    }
+    const auto m4 = mean.view({1, C, 1, 1}), s4 = invstd.view({1, C, 1, 1});
+    const auto xhat = (xd - m4) * s4;
+    ctx->save_for_backward({x, weight, mean, invstd});
+    ctx->saved_data["count"] = count;
+    ctx->saved_data["reduce"] = int64_t(reinterpret_cast<intptr_t>(reduce));
+    return (xhat * weight.to(torch::kFloat64).view({1, C, 1, 1}) + bias.to(torch::kFloat64).view({1, C, 1, 1}))
+        .to(x.scalar_type());
+  }
+
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grad) {
+    const auto saved = ctx->get_saved_variables();
+    const auto &x = saved[0], &weight = saved[1], &mean = saved[2], &invstd = saved[3];
+    const auto* reduce = reinterpret_cast<const StatsReducer*>(intptr_t(ctx->saved_data["reduce"].toInt()));
+    const double count = ctx->saved_data["count"].toDouble();
+    const int64_t C = x.size(1);
+    const auto dy = grad[0].to(torch::kFloat64);
+    const auto s4 = invstd.view({1, C, 1, 1});
+    const auto xhat = (x.to(torch::kFloat64) - mean.view({1, C, 1, 1})) * s4;
+    const auto sum_dy = channel_sums(dy), sum_dy_xhat = channel_sums(dy * xhat);
+    auto both = torch::cat({sum_dy, sum_dy_xhat});
+    (*reduce)(both);
+    const auto mean_dy = (both.slice(0, 0, C) / count).view({1, C, 1, 1});
+    const auto mean_dy_xhat = (both.slice(0, C, 2 * C) / count).view({1, C, 1, 1});
+    const auto dx = (weight.to(torch::kFloat64).view({1, C, 1, 1}) * s4) * (dy - mean_dy - xhat * mean_dy_xhat);
+    return {dx.to(x.scalar_type()), sum_dy_xhat.to(weight.scalar_type()), sum_dy.to(weight.scalar_type()),
+            torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+  }
+};
+
+}  // namespace
+
+int synchronise_batchnorm(torch::nn::Module& module, std::shared_ptr<const StatsReducer> reduce) {
+  int n = 0;
+  for (const auto& m : module.modules(/*include_self=*/true))
+    if (auto* bn = dynamic_cast<BatchNormImpl*>(m.get())) {
+      bn->sync = reduce;
+      ++n;
+    }
+  return n;
+}
+
 torch::Tensor BatchNormImpl::forward(const torch::Tensor& x) {
   constexpr double momentum = 0.1, eps = 1e-5;
   if (is_training()) {
@@ -50,6 +120,7 @@ torch::Tensor BatchNormImpl::forward(const torch::Tensor& x) {
       torch::NoGradGuard no_grad;
       num_batches_tracked += 1;
     }
+    if (sync) return SyncBatchNorm::apply(x, weight, bias, running_mean, running_var, sync.get(), momentum, eps);
     return torch::batch_norm(x, weight, bias, running_mean, running_var, true, momentum, eps, false);
   }
   if (batch_stats_at_inference)  // [parity] statistics of the reference views, not updated

@@ -1,15 +1,17 @@
 #pragma once
-// SPEC 3.1: the image encoder (ResNet-18 up to layer2, torchvision layout and names), the
+// METHOD 3.1: the image encoder (ResNet-18 up to layer2, torchvision layout and names), the
 // 384-channel pixel feature p_v, the 192-channel reduction and the painting of the body.
 //
 // The pixel feature is the concatenation of three bilinearly upsampled ResNet levels and a 1x1
 // convolution of the raw image. It is never materialised at full resolution on the fast path:
 // sampling goes through model/sampling.hpp (exact), and per-pixel linear layers that follow p_v
-// are applied to each level before sampling (SPEC 9), see PixelReadout.
+// are applied to each level before sampling (METHOD 9), see PixelReadout.
 
 #include <torch/torch.h>
 
+#include <functional>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -18,9 +20,19 @@
 
 namespace th::model {
 
+// Sums a float64 tensor in place over the data-parallel ranks: what synchronised BatchNorm
+// needs of the ranks (train/ supplies it from the communicator; the model knows no ranks).
+using StatsReducer = std::function<void(torch::Tensor&)>;
+
 // BatchNorm2d with torchvision's parameter names. At inference it normalises with the
 // statistics of the current batch (the V reference images) when `batch_stats_at_inference`
-// [parity, SPEC 3.1], otherwise with the running statistics.
+// [parity, METHOD 3.1], otherwise with the running statistics.
+//
+// In training with `sync` set (several ranks, `train.sync_batchnorm`), the batch is every
+// rank's images together, as the reference trained with SyncBatchNorm: per-channel sums of x
+// and x^2 (float64) are summed over the ranks in the forward pass, and those of dy and
+// dy * x_hat in the backward pass, so each rank's input gradient is that of one batch of all
+// ranks' images. The weight and bias gradients stay per rank (the gradient all-reduce sums them).
 class BatchNormImpl : public torch::nn::Module {
  public:
   BatchNormImpl(int64_t channels, bool batch_stats_at_inference);
@@ -28,8 +40,13 @@ class BatchNormImpl : public torch::nn::Module {
 
   torch::Tensor weight, bias, running_mean, running_var, num_batches_tracked;
   bool batch_stats_at_inference;
+  std::shared_ptr<const StatsReducer> sync;  // null: this rank's batch alone
 };
 TORCH_MODULE(BatchNorm);
+
+// Sets (or, with nullptr, clears) the reducer of every BatchNorm inside `module`; returns how
+// many there are.
+int synchronise_batchnorm(torch::nn::Module& module, std::shared_ptr<const StatsReducer> reduce);
 
 class BasicBlockImpl : public torch::nn::Module {
  public:
@@ -78,7 +95,7 @@ struct EncodedViews {
 };
 
 // A per-pixel linear layer y = W p_v + b on the pixel feature, precomputed per frame on each
-// level (SPEC 9: a linear layer commutes with bilinear upsampling and sampling). Sampled with
+// level (METHOD 9: a linear layer commutes with bilinear upsampling and sampling). Sampled with
 // PixelReadout::sample it equals linear(grid_sample(pixel_features)) up to float rounding.
 struct PixelReadout {
   torch::Tensor table;         // (sum_l V h_l w_l, Cout) level maps, channels-last, stacked
@@ -134,7 +151,7 @@ class EncoderImpl : public torch::nn::Module {
   PixelReadout make_readout(const EncodedViews& enc, const torch::Tensor& weight,
                             const torch::Tensor& bias) const;
 
-  // SPEC 3.1 painting: holder features (192) at the projections of the body vertices, zero
+  // METHOD 3.1 painting: holder features (192) at the projections of the body vertices, zero
   // where the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, 192).
   torch::Tensor paint(const EncodedViews& enc, const torch::Tensor& uv,
                       const torch::Tensor& visibility) const;
@@ -158,7 +175,7 @@ TORCH_MODULE(Encoder);
 // reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
 torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv);
 
-// Pinhole projection x_cam = R x + T, uv = (K x_cam)[:2] / z (SPEC 2.2).
+// Pinhole projection x_cam = R x + T, uv = (K x_cam)[:2] / z (METHOD 2.2).
 // pts: (N, 3) world; K, R: (V, 3, 3); T: (V, 3, 1) -> (V, N, 2) pixel coordinates.
 torch::Tensor project_points(const torch::Tensor& pts, const torch::Tensor& K,
                              const torch::Tensor& R, const torch::Tensor& T);

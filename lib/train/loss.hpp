@@ -1,5 +1,5 @@
 #pragma once
-// The training loss (SPEC 5): the rendered rays are put back into their patches (black where no
+// The training loss (METHOD 5): the rendered rays are put back into their patches (black where no
 // ray was rendered, as the target's background), then MSE + lpips_weight * LPIPS on the patches.
 
 #include <torch/types.h>

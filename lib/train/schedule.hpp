@@ -1,5 +1,5 @@
 #pragma once
-// Learning-rate schedule (SPEC 5): per epoch, linear warm-up from 0 over warmup_epochs, then a
+// Learning-rate schedule (METHOD 5): per epoch, linear warm-up from 0 over warmup_epochs, then a
 // cosine from lr down to min_lr at the last epoch.
 
 #include "core/config.hpp"

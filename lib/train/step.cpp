@@ -23,7 +23,7 @@ std::string last_good(const StepPosition& where) {
 }  // namespace
 
 StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const std::vector<int>& ranks,
-                          int world, const StepPosition& where, bool distributed) {
+                          int world, const StepPosition& where, dist::Communicator* comm) {
   StepStats stats;
   const uint64_t seed = uint64_t(c.config.seed);
   for (const int rank : ranks) {
@@ -45,7 +45,7 @@ StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const 
           << "); last good checkpoint: " << last_good(where)
           << " (try a lower train.lr or check the data of sample '" << sample.human << "' frame "
           << sample.frame << ")";
-      if (!distributed) fail(msg.str());
+      if (!comm) fail(msg.str());
       stats.bad_loss = msg.str();
     } else if (!loss.total.requires_grad()) {
       // No sample point lay inside the body's box: the image has nothing to learn from.
@@ -53,11 +53,17 @@ StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const 
       msg << "sample '" << sample.human << "' frame " << sample.frame << ", target view " << sample.target_view
           << ": no ray of its patches meets the body's box at step " << where.step
           << " (is the body inside that view? check its calibration and mask)";
-      if (!distributed) fail(msg.str());
+      if (!comm) fail(msg.str());
       stats.bad_loss = msg.str();
-    } else {
-      loss.total.backward();
     }
+    // Every rank learns of a failed sample before any back-propagates: the backward pass of
+    // synchronised BatchNorm is a collective that every rank must join. A failure anywhere
+    // ends the step everywhere (synchronise_step names it).
+    if (comm && comm->sum({stats.bad_loss.empty() ? 0.0 : 1.0}, "whether a sample failed")[0] > 0) {
+      if (stats.bad_loss.empty()) stats.peer_failed = true;
+      break;
+    }
+    if (stats.bad_loss.empty()) loss.total.backward();
     stats.loss += loss_value;
     stats.mse += loss.mse.item<double>();
     stats.lpips += loss.perceptual.defined() ? loss.perceptual.item<double>() : NAN;

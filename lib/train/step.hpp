@@ -1,5 +1,5 @@
 #pragma once
-// One training step (SPEC 5), in two parts that train() calls in turn:
+// One training step (METHOD 5), in two parts that train() calls in turn:
 // - accumulate_step: forward and backward of this process's samples (one per rank it plays),
 //   gradients accumulating in the parameters;
 // - synchronise_step: across processes, the step's statistics summed, a non-finite loss on any
@@ -36,6 +36,7 @@ namespace th::train {
 struct StepStats {
   double loss = 0, mse = 0, lpips = 0, psnr = 0, rays = 0;
   std::string bad_loss;  // why this process's sample failed: a non-finite loss, or no body in view (data parallel)
+  bool peer_failed = false;  // another rank's sample failed (data parallel): nothing was back-propagated
 };
 
 // What a step reads besides the samples.
@@ -58,10 +59,11 @@ struct StepPosition {
 
 // Takes one sample per entry of `ranks` from `loader` (stratified jitter seeded per sample of
 // the global batch of `world`), renders its rays and back-propagates its loss. A non-finite loss
-// is a th::Error naming the step, the sample and the last good checkpoint, or with
-// `distributed` only recorded in bad_loss (the other ranks must learn of it before anyone steps).
+// is a th::Error naming the step, the sample and the last good checkpoint, or with `comm` (several
+// ranks) only recorded in bad_loss: the ranks agree before each backward pass whether any sample
+// failed, and then none back-propagates (synchronise_step turns it into an error everywhere).
 StepStats accumulate_step(const StepContext& context, data::Prefetcher& loader, const std::vector<int>& ranks,
-                          int world, const StepPosition& where, bool distributed);
+                          int world, const StepPosition& where, dist::Communicator* comm);
 
 // With `comm`: one small reduction of the statistics (and of whether a rank saw a non-finite
 // loss, then a th::Error everywhere), then the gradients averaged over the `world` samples.

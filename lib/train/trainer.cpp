@@ -69,7 +69,7 @@ CheckpointState broadcast_state(dist::Communicator& comm, model::TransHumanImpl&
 }
 
 // BatchNorm running statistics: averaged over the ranks after each step so every rank holds the
-// same buffers (the batch statistics used in training are per sample, SPEC 3.1).
+// same buffers (the batch statistics used in training are per sample, METHOD 3.1).
 std::vector<torch::Tensor> batchnorm_statistics(torch::nn::Module& net) {
   std::vector<torch::Tensor> out;
   for (const auto& m : net.modules(/*include_self=*/false))
@@ -188,6 +188,13 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
     spdlog::info("resumed from {} at epoch {}, step {}", last_ckpt_.string(), st_.epoch, st_.step);
   }
   bn_stats_ = batchnorm_statistics(*model_);
+  if (comm_ && tc_.sync_batchnorm) {
+    dist::Communicator* comm = comm_;
+    const int layers = model::synchronise_batchnorm(
+        *model_, std::make_shared<const model::StatsReducer>(
+                     [comm](torch::Tensor& t) { comm->sum_in_place(t, "synchronised BatchNorm (train.sync_batchnorm)"); }));
+    spdlog::info("synchronised BatchNorm: {} layers normalise over all {} ranks' images", layers, procs_);
+  }
   if (comm_) {
     st_ = broadcast_state(*comm_, *model_, *optim_, st_);
     spdlog::info("data-parallel training: {} ranks, global batch {} ({} backend)", procs_, world_,
@@ -216,7 +223,7 @@ TrainSummary Run::go() {
     for (int it = st_.iteration; it < tc_.iters_per_epoch && st_.step < stop_step_; ++it) {
       const auto t0 = std::chrono::steady_clock::now();
       optim_->zero_grad();
-      StepStats stats = accumulate_step(context, loader, ranks_, world_, position(epoch), comm_ != nullptr);
+      StepStats stats = accumulate_step(context, loader, ranks_, world_, position(epoch), comm_);
       synchronise_step(comm_, stats, *model_, world_, per_process_, position(epoch));
       torch::nn::utils::clip_grad_value_(model_->parameters(), tc_.grad_clip);
       optim_->step();

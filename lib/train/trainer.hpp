@@ -1,5 +1,5 @@
 #pragma once
-// transhuman-train's loop (SPEC 5): patches of a random target view, MSE + 0.1 LPIPS (loss.hpp),
+// transhuman-train's loop (METHOD 5): patches of a random target view, MSE + 0.1 LPIPS (loss.hpp),
 // Adam with element-wise clipping, warm-up + cosine per epoch (schedule.hpp), atomic checkpoints
 // and exact resume (pipeline/checkpoint.hpp), periodic validation renders, NaN and collapse
 // detection, JSON-lines metrics; data-parallel across processes (step.hpp, lib/dist).

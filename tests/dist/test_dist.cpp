@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <set>
+#include <thread>
 
 #include "core/config_io.hpp"
 #include "core/error.hpp"
@@ -14,6 +15,7 @@
 #include "dist/launcher.hpp"
 #include "support/test_env.hpp"
 #include "dist/processes.hpp"
+#include "model/encoder.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "train/trainer.hpp"
@@ -191,7 +193,9 @@ TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulatin
           "[dist][slow]") {
   const int K = 3;
   const fs::path dir = th::test::scratch_dir("dist_two_ranks");
-  const auto overrides = tiny_overrides();
+  // Each rank's BatchNorm on its own images: what one process accumulating the two samples one
+  // after the other computes (synchronised BatchNorm has its own test below).
+  const auto overrides = tiny_overrides({"train.sync_batchnorm=false"});
   // transhuman-train --nproc 2: the launcher starts both ranks.
   const Process launcher = th::test::spawn(
       train_command(dir / "run", {"--nproc", "2", "--max-steps", std::to_string(K), "--rank-state",
@@ -204,7 +208,7 @@ TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulatin
   REQUIRE(status.has_value());
   REQUIRE(describe(*status) == "exit 0");
 
-  const auto c = tiny_config();
+  const auto c = tiny_config({"train.sync_batchnorm=false"});
   const State r0 = state_of(dir / "ranks" / "rank0.pt", c), r1 = state_of(dir / "ranks" / "rank1.pt", c);
   CHECK(r0.step == K);
   CHECK(r1.step == K);
@@ -239,6 +243,123 @@ TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulatin
   CHECK_THAT(line, Catch::Contains("\"world_size\": 2") && Catch::Contains("\"global_batch\": 2") &&
                        Catch::Contains("\"allreduce_seconds\""));
   CHECK(fs::exists(dir / "run" / "checkpoints" / "latest.pt"));
+}
+
+namespace {
+
+// The loss of a trunk's levels against fixed weights (the same for any split of the batch).
+torch::Tensor trunk_loss(th::model::ResNetTrunk& trunk, const torch::Tensor& images,
+                         const std::vector<torch::Tensor>& weights) {
+  const auto levels = trunk->forward(images);
+  auto loss = torch::zeros({}, torch::kFloat64);
+  for (size_t l = 0; l < levels.size(); ++l) loss = loss + (levels[l].to(torch::kFloat64) * weights[l]).sum();
+  return loss;
+}
+
+struct TrunkGrads {
+  double loss = 0;
+  std::map<std::string, torch::Tensor> params, buffers;
+  torch::Tensor input;
+};
+
+TrunkGrads trunk_grads(th::model::ResNetTrunk& trunk, const torch::Tensor& images,
+                       const std::vector<torch::Tensor>& weights) {
+  auto x = images.clone().requires_grad_(true);
+  const auto loss = trunk_loss(trunk, x, weights);
+  loss.backward();
+  TrunkGrads g;
+  g.loss = loss.item<double>();
+  for (const auto& p : trunk->named_parameters()) g.params[p.key()] = p.value().grad().clone();
+  for (const auto& b : trunk->named_buffers())
+    if (b.value().is_floating_point()) g.buffers[b.key()] = b.value().clone();
+  g.input = x.grad().clone();
+  return g;
+}
+
+}  // namespace
+
+TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one batch of both ranks' images",
+          "[dist]") {
+  torch::set_num_threads(1);
+  const int64_t V = 3;  // reference images per rank
+  torch::manual_seed(7);
+  const auto images = torch::rand({2 * V, 3, 40, 48});
+  th::model::ResNetTrunk probe(true);
+  std::vector<torch::Tensor> weights;
+  for (const auto& level : probe->forward(images.slice(0, 0, 1)))
+    weights.push_back(torch::randn({2 * V, level.size(1), level.size(2), level.size(3)}, torch::kFloat64));
+  auto make_trunk = [] {
+    torch::manual_seed(11);
+    th::model::ResNetTrunk t(true);
+    t->train();
+    return t;
+  };
+  auto slice = [&](const std::vector<torch::Tensor>& w, int r) {
+    std::vector<torch::Tensor> out;
+    for (const auto& t : w) out.push_back(t.slice(0, r * V, (r + 1) * V));
+    return out;
+  };
+
+  // One process, one batch of all 2V images.
+  auto whole = make_trunk();
+  const TrunkGrads single = trunk_grads(whole, images, weights);
+
+  // Two ranks (threads of this process, each with its own store connection and Gloo group),
+  // each with V of the images.
+  auto on_ranks = [&](bool sync) {
+    const int port = th::dist::free_port();
+    std::vector<TrunkGrads> out(2);
+    std::vector<std::string> errors(2);
+    std::vector<int> layers(2, 0);
+    // Made here, one after the other: the seeded initialisation draws from one global generator.
+    std::vector<th::model::ResNetTrunk> trunks{make_trunk(), make_trunk()};
+    std::vector<std::thread> threads;
+    for (int r = 0; r < 2; ++r)
+      threads.emplace_back([&, r] {
+        try {
+          th::dist::Environment env;
+          env.rank = r, env.world_size = 2, env.local_rank = r, env.master_port = port;
+          th::dist::Communicator comm(env, "gloo", torch::kCPU, 60, 25);
+          auto& trunk = trunks[size_t(r)];
+          // (Catch's assertions are not thread-safe: results are checked after the join.)
+          if (sync)
+            layers[size_t(r)] = th::model::synchronise_batchnorm(
+                *trunk, std::make_shared<const th::model::StatsReducer>(
+                            [&comm](torch::Tensor& t) { comm.sum_in_place(t, "test statistics"); }));
+          out[size_t(r)] = trunk_grads(trunk, images.slice(0, r * V, (r + 1) * V), slice(weights, r));
+          comm.barrier("the end of the test");
+        } catch (const std::exception& e) {
+          errors[size_t(r)] = e.what();
+        }
+      });
+    for (auto& t : threads) t.join();
+    INFO(errors[0] << errors[1]);
+    REQUIRE((errors[0].empty() && errors[1].empty()));
+    CHECK(layers == std::vector<int>(2, sync ? 10 : 0));  // every BatchNorm of the trunk
+    return out;
+  };
+  // The largest difference from the single batch: loss, parameter gradients (summed over the
+  // ranks, as the gradient all-reduce does), input gradients, running statistics.
+  auto difference = [&](const std::vector<TrunkGrads>& ranks) {
+    double d = std::abs(ranks[0].loss + ranks[1].loss - single.loss) / std::max(1.0, std::abs(single.loss));
+    for (const auto& [name, g] : single.params) {
+      const auto sum = ranks[0].params.at(name) + ranks[1].params.at(name);
+      d = std::max(d, ((sum - g).abs().max() / g.abs().max().clamp_min(1e-12)).item<double>());
+    }
+    const auto input = torch::cat({ranks[0].input, ranks[1].input});
+    d = std::max(d, ((input - single.input).abs().max() / single.input.abs().max()).item<double>());
+    for (const auto& [name, b] : single.buffers)
+      for (const auto& rank : ranks)
+        d = std::max(d, ((rank.buffers.at(name) - b).abs().max() / b.abs().max().clamp_min(1e-12)).item<double>());
+    return d;
+  };
+  const double synced = difference(on_ranks(true));
+  INFO("relative difference with synchronised BatchNorm: " << synced);
+  CHECK(synced <= 1e-5);
+  // Control: each rank normalising its own images is another function (the check can fail).
+  const double apart = difference(on_ranks(false));
+  INFO("relative difference with per-rank BatchNorm: " << apart);
+  CHECK(apart > 1e-3);
 }
 
 TEST_CASE("a killed rank makes the other exit with an error within the timeout, and 1 rank resumes",
