@@ -1,4 +1,4 @@
-// transhuman-mesh: a triangle mesh of a person from a trained checkpoint's density (SPEC 7).
+// transhuman-mesh: a triangle mesh of a person from a trained checkpoint's density (METHOD 7).
 #include <spdlog/spdlog.h>
 
 #include "app/app.hpp"
@@ -18,8 +18,8 @@ int main(int argc, char** argv) {
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
     cli.add_option("--frame", request.frame, "body frame (annots index); default: the setting's first")
         ->check(th::app::at_least(0));
-    cli.add_option("--voxel", request.voxel, "grid spacing in metres (SPEC 7: 0.005)")->check(th::app::above(0));
-    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density, >= 0 (SPEC 7: 20)")
+    cli.add_option("--voxel", request.voxel, "grid spacing in metres (METHOD 7: 0.005)")->check(th::app::above(0));
+    cli.add_option("--threshold", request.threshold, "marching-cubes level on raw density, >= 0 (METHOD 7: 20)")
         ->check(th::app::at_least(0));
     cli.add_flag("--colors", request.colors, "vertex colours from the colour branch");
     cli.add_option("--view", request.view, "the preview looks from this camera (and from its side)")

@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
         ->check(th::app::at_least(0));
     cli.add_option("--host", o.host, "address to listen on (default 127.0.0.1: this machine only)");
     cli.add_option("--port", o.port, "port")->check(th::app::in_range(1, 65535));
-    cli.add_option("--view", o.view, "camera whose image size the first view takes (SPEC 7: 3)")
+    cli.add_option("--view", o.view, "camera whose image size the first view takes (METHOD 7: 3)")
         ->check(th::app::at_least(0));
     cli.add_option("--max-size", o.max_size, "largest image side a request may ask for")
         ->check(th::app::in_range(16, 4096));

@@ -1,4 +1,4 @@
-// Model and renderer benchmark (SPEC 3, 4, 9): per-point throughput of DPaRF + FDI + heads at
+// Model and renderer benchmark (METHOD 3, 4, 9): per-point throughput of DPaRF + FDI + heads at
 // several chunk sizes, one training step on the default ray batch, and one 512 x 512 frame
 // rendered progressively, for 64 and 16 samples per ray. Synthetic inputs (random images, a
 // humanoid point body of 6890 vertices, 300 tokens); random weights.
@@ -105,7 +105,7 @@ Scene make_scene(int64_t size, int64_t nv, int64_t nt) {
   return s;
 }
 
-// All rays of the target view that meet the body's box (padded 0.05 m on z like SPEC 2.2).
+// All rays of the target view that meet the body's box (padded 0.05 m on z like METHOD 2.2).
 render::Rays box_rays(const Scene& s, torch::Tensor* pixel_index = nullptr) {
   const auto n = s.size;
   const auto grid = torch::meshgrid({torch::arange(n, torch::kFloat), torch::arange(n, torch::kFloat)}, "ij");
@@ -123,7 +123,7 @@ render::Rays box_rays(const Scene& s, torch::Tensor* pixel_index = nullptr) {
           tmax.index_select(0, idx)};
 }
 
-// SPEC 5: 6 patches of 20 x 20 around random in-box pixels (clipped, overlapping allowed).
+// METHOD 5: 6 patches of 20 x 20 around random in-box pixels (clipped, overlapping allowed).
 render::Rays patch_rays(const Scene& s) {
   torch::Tensor pix;
   const auto all = box_rays(s, &pix);
@@ -371,7 +371,7 @@ int main(int argc, char** argv) {
     }
     r.line("");
     r.line("Best of " + std::to_string(rounds) + " rounds over all chunk sizes (points/s). For comparison, the reference "
-           "implementation on this machine (SPEC 9): 6,200 forward at its inference chunk of 32,768 points, 2,070 "
+           "implementation on this machine (METHOD 9): 6,200 forward at its inference chunk of 32,768 points, 2,070 "
            "forward+backward at its training batch of 153,600; 19,900 and 5,100 at its best chunk (~9,600).");
     r.line("Forward: full colour for every point. Density-first: colour only where sigma > 0 (about half here).");
     r.line("Forward time per stage:");
@@ -424,7 +424,7 @@ int main(int argc, char** argv) {
         if (s < sec) sec = s, prof = p;
       }
       // The same step skipping samples farther than 0.1 m from the body (train.skip_far_points,
-      // SPEC 9; off by default for parity).
+      // METHOD 9; off by default for parity).
       const auto t1 = Clock::now();
       step(nullptr, true);
       const double sec_skip = seconds_since(t1);

@@ -1,4 +1,4 @@
-// libFuzzer entry for camera path files (video/camera_path.hpp, SPEC 7): each input, written to
+// libFuzzer entry for camera path files (video/camera_path.hpp, METHOD 7): each input, written to
 // a file, is read as a camera path. th::Error is the expected answer to bad input; a crash, a
 // sanitizer report, a leak or any other exception (YAML::Exception, c10::Error) is a bug.
 #include <cstddef>

@@ -1,4 +1,4 @@
-// libFuzzer entry for the untrusted-input readers of lib/io (SPEC 1.4): arbitrary bytes go to
+// libFuzzer entry for the untrusted-input readers of lib/io (METHOD 1.4): arbitrary bytes go to
 // parse_pickle, parse_npy, parse_npy_value and parse_npz. th::Error is the expected answer to
 // bad input; a crash, a sanitizer report, a leak or any other exception is a bug. Whatever
 // parses as a pickle must also survive pickle_bytes and read back equal.

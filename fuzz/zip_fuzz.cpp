@@ -1,4 +1,4 @@
-// libFuzzer entry for zip archives (SPEC 1.4, SPEC 8): arbitrary bytes go to the project's zip
+// libFuzzer entry for zip archives (METHOD 1.4, METHOD 8): arbitrary bytes go to the project's zip
 // reader (io/zip.hpp, used by .npz) and, written to a file, to the reader of the reference
 // implementation's .pth checkpoints (LibTorch's PyTorchStreamReader + the project's unpickler).
 // LibTorch checks each record's CRC, so a mutated archive rarely gets as far as the unpickler:

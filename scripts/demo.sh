@@ -26,10 +26,10 @@ fi
   --out "$run/eval_identity" --setting identity
 
 ckpt=$run/checkpoints/latest.pt
-# Free-viewpoint video: the SPEC 7 orbit (36 views) around an unseen person.
+# Free-viewpoint video: the METHOD 7 orbit (36 views) around an unseen person.
 "$bin/transhuman-render" --config configs/demo.yaml --checkpoint "$ckpt" --out "$run/orbit" \
   --human CoreView_s08 --force
-# A mesh of the same person. SPEC 7's threshold of 20 suits a fully trained model; after the
+# A mesh of the same person. METHOD 7's threshold of 20 suits a fully trained model; after the
 # demo's 11 minutes the density near the body peaks around 25 (the log prints its quantiles),
 # so the demo cuts at 8, on a 1 cm grid.
 "$bin/transhuman-mesh" --config configs/demo.yaml --checkpoint "$ckpt" --out "$run/mesh" \

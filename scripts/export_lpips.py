@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Converts LPIPS-VGG v0.1 weights into the .npz that transhuman-train/-eval load (SPEC 5, 6).
+"""Converts LPIPS-VGG v0.1 weights into the .npz that transhuman-train/-eval load (METHOD 5, 6).
 
 Run once, where torchvision's VGG16 ImageNet weights and the LPIPS v0.1 linear layers exist:
 
@@ -49,7 +49,7 @@ def export(features, lins, out):
 
 
 def reference_lpips(features, lins, a, b):
-    """LPIPS v0.1 of (B, 3, H, W) images in [-1, 1]: the formula of SPEC 5."""
+    """LPIPS v0.1 of (B, 3, H, W) images in [-1, 1]: the formula of METHOD 5."""
     shift = torch.tensor([-.030, -.088, -.188]).view(1, 3, 1, 1)
     scale = torch.tensor([.458, .448, .450]).view(1, 3, 1, 1)
     x, y = (a - shift) / scale, (b - shift) / scale

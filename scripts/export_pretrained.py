@@ -1,6 +1,6 @@
 #!/usr/bin/python3
 """Converts torchvision's ImageNet ResNet-18 weights into the file TransHuman-C++ loads as
-model.encoder.pretrained (SPEC 3.1): an .npz of torchvision's state dict names (conv1.weight,
+model.encoder.pretrained (METHOD 3.1): an .npz of torchvision's state dict names (conv1.weight,
 bn1.running_mean, layer1.0.conv1.weight, ...; float32, num_batches_tracked int64). Only conv1,
 bn1, layer1 and layer2 are used; the rest is written too and ignored.
 

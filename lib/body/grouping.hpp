@@ -1,5 +1,5 @@
 #pragma once
-// Body grouping (SPEC 2.5): which token each body vertex belongs to. The paper's choice is
+// Body grouping (METHOD 2.5): which token each body vertex belongs to. The paper's choice is
 // k-means on the canonical vertices (computed once, cached); the ablations voxelise canonical
 // space or the posed body of each frame on a grid instead.
 

@@ -226,7 +226,7 @@ LbsResult lbs(const SmplModel& m, const torch::Tensor& poses, const torch::Tenso
               "model with ", m.num_betas());
 
   LbsResult r;
-  // SPEC 2.3: v_shaped = v_template + shapedirs . shapes; J = J_regressor . v_shaped.
+  // METHOD 2.3: v_shaped = v_template + shapedirs . shapes; J = J_regressor . v_shaped.
   r.v_shaped = m.v_template + torch::matmul(m.shapedirs.slice(2, 0, beta.numel()), beta);
   r.joints = torch::matmul(m.J_regressor, r.v_shaped);
 
@@ -278,7 +278,7 @@ torch::Tensor smpl_to_world(const torch::Tensor& points, const torch::Tensor& Rh
 
 torch::Tensor world_to_smpl(const torch::Tensor& points, const torch::Tensor& Rh,
                             const torch::Tensor& Th) {
-  // SPEC 2.2: x_smpl = Rh^T (x_world - Th); row vectors, so multiply by R on the right.
+  // METHOD 2.2: x_smpl = Rh^T (x_world - Th); row vectors, so multiply by R on the right.
   auto R = geometry::rodrigues(as_row(Rh, 3, "Rh"));
   return torch::matmul(points.to(torch::kFloat64) - as_row(Th, 3, "Th").reshape({1, 3}), R);
 }

@@ -1,9 +1,9 @@
 #pragma once
-// The SMPL body model (SPEC 1.5) and linear blend skinning (SPEC 2.3).
+// The SMPL body model (METHOD 1.5) and linear blend skinning (METHOD 2.3).
 //
 // The model is read from SMPL's own pickled .pkl (chumpy arrays, sparse J_regressor) or from a
 // plain .npz with the same field names (what transhuman-synth writes). All float fields are
-// held as float64 on the CPU; LBS runs in float64 (SPEC 2.3).
+// held as float64 on the CPU; LBS runs in float64 (METHOD 2.3).
 
 #include <torch/types.h>
 
@@ -58,7 +58,7 @@ void save_smpl_pkl(const std::filesystem::path& path, const SmplModel& model);
 
 // Result of LBS for one pose and shape, all float64 in the SMPL frame (before Rh, Th).
 struct LbsResult {
-  torch::Tensor A;             // (V, 4, 4) per-vertex transforms (SPEC 2.3)
+  torch::Tensor A;             // (V, 4, 4) per-vertex transforms (METHOD 2.3)
   torch::Tensor G;             // (24, 4, 4) joint transforms with the rest offset removed
   torch::Tensor joints;        // (24, 3) rest joints of the shaped body, J_regressor v_shaped
   torch::Tensor posed_joints;  // (24, 3) joints after posing
@@ -67,7 +67,7 @@ struct LbsResult {
 };
 
 // poses: (72) or (1, 72) axis-angle per joint; shapes: (S') or (1, S'), S' <= S (missing
-// coefficients are 0). SPEC 2.3.
+// coefficients are 0). METHOD 2.3.
 LbsResult lbs(const SmplModel& model, const torch::Tensor& poses, const torch::Tensor& shapes);
 
 // Skins arbitrary rest points with their own weights: points (P, 3) rest (shaped) positions,
@@ -75,7 +75,7 @@ LbsResult lbs(const SmplModel& model, const torch::Tensor& poses, const torch::T
 torch::Tensor skin_points(const torch::Tensor& points, const torch::Tensor& weights,
                           const torch::Tensor& G);
 
-// SMPL frame <-> world (SPEC 2.2): x_world = Rodrigues(Rh) x_smpl + Th.
+// SMPL frame <-> world (METHOD 2.2): x_world = Rodrigues(Rh) x_smpl + Th.
 // points: (N, 3); Rh, Th: (3), (1, 3) or (3, 1). Returns (N, 3) float64.
 torch::Tensor smpl_to_world(const torch::Tensor& points, const torch::Tensor& Rh,
                             const torch::Tensor& Th);

@@ -1,5 +1,5 @@
 #pragma once
-// Visibility of body vertices in a view (SPEC 2.4): a vertex is visible when the body mesh does
+// Visibility of body vertices in a view (METHOD 2.4): a vertex is visible when the body mesh does
 // not occlude it, decided with a z-buffer of the mesh at the working resolution. This replaces
 // the precomputed per-view files the reference implementation reads (also supported:
 // load_visibility_file).

@@ -143,7 +143,7 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   s.human = human.name();
   s.frame = it.frame;
   s.target_view = it.target_view;
-  if (setting_.random_references) {  // any cameras, the target included (SPEC 1.2)
+  if (setting_.random_references) {  // any cameras, the target included (METHOD 1.2)
     std::vector<int> all(human.num_cameras());
     std::iota(all.begin(), all.end(), 0);
     std::shuffle(all.begin(), all.end(), rng);

@@ -1,6 +1,6 @@
 #pragma once
 // The dataset object: samples of a split setting, each a target view with its rays and the
-// reference views and body of the same frame (SPEC 1.2, 2, 5), plus background prefetching.
+// reference views and body of the same frame (METHOD 1.2, 2, 5), plus background prefetching.
 
 #include <torch/types.h>
 
@@ -25,7 +25,7 @@ struct SmplModel;
 
 namespace th::data {
 
-// The body of one frame (SPEC 2.2, 2.3), float32.
+// The body of one frame (METHOD 2.2, 2.3), float32.
 struct FrameBody {
   torch::Tensor vertices;     // (Nv, 3) world
   torch::Tensor smpl_vertices;  // (Nv, 3) SMPL frame: Rh^T (x - Th)

@@ -1,5 +1,5 @@
 #pragma once
-// Colour jitter (SPEC 2.1): brightness, contrast, saturation and hue in random order, as
+// Colour jitter (METHOD 2.1): brightness, contrast, saturation and hue in random order, as
 // torchvision's ColorJitter, with one set of parameters shared by the target and all reference
 // views of a sample.
 

@@ -1,6 +1,6 @@
 #pragma once
 // Camera rays, their near/far against the human's box, the 2D box mask and the training patch
-// sampler (SPEC 2.2, 5).
+// sampler (METHOD 2.2, 5).
 
 #include <opencv2/core.hpp>
 #include <torch/types.h>
@@ -12,10 +12,10 @@
 namespace th::data {
 
 // An axis-aligned box in world coordinates: (2, 3) float64, rows min and max.
-// bounds_of(vertices (V, 3), pad_z): the AABB of a frame's vertices padded on z only (SPEC 2.2).
+// bounds_of(vertices (V, 3), pad_z): the AABB of a frame's vertices padded on z only (METHOD 2.2).
 torch::Tensor bounds_of(const torch::Tensor& vertices, double pad_z);
 
-// Rays through integer pixel centres (SPEC 2.2): origins o = -R^T T and directions
+// Rays through integer pixel centres (METHOD 2.2): origins o = -R^T T and directions
 // d = R^T K^-1 [x, y, 1]^T, not normalised (t equals camera depth).
 // pixels: (N, 2) float/int (x, y); returns {origins (N, 3), dirs (N, 3)} float64.
 struct RayBundle {
@@ -27,7 +27,7 @@ RayBundle pixel_rays(const torch::Tensor& pixels, const torch::Tensor& K, const 
 // Every pixel of a width x height image, row-major: pixels (H*W, 2) int64 (x, y).
 torch::Tensor pixel_grid(int width, int height);
 
-// Near/far of rays against the box (SPEC 2.2, reference behaviour kept): the box is padded by
+// Near/far of rays against the box (METHOD 2.2, reference behaviour kept): the box is padded by
 // 0.01, direction components with |d| < 1e-5 become +1e-5, the 6 plane intersections are
 // computed and a ray is valid iff exactly two of them lie in the box (+-1e-6); near/far are
 // the distances from the origin to those two points divided by |d| (with the adjusted d).
@@ -44,7 +44,7 @@ NearFar near_far(const torch::Tensor& origins, const torch::Tensor& dirs, const 
 cv::Mat box_mask(const torch::Tensor& box, const torch::Tensor& K, const torch::Tensor& R,
                  const torch::Tensor& T, int width, int height);
 
-// Training patches (SPEC 5): `count` squares of side `size`; each centre drawn uniformly from
+// Training patches (METHOD 5): `count` squares of side `size`; each centre drawn uniformly from
 // the person's pixels with probability body_prob, otherwise from the in-box background; the
 // square is clipped to the image. Patches may overlap.
 struct Patch {

@@ -1,5 +1,5 @@
 #pragma once
-// Which sample each rank trains on (SPEC 5, data-parallel): every epoch is a seeded permutation
+// Which sample each rank trains on (METHOD 5, data-parallel): every epoch is a seeded permutation
 // of the dataset, the same on every rank; iteration `it` of an epoch takes the global positions
 // it*W .. it*W + W-1 of that permutation (W ranks), rank r the position it*W + r, cycling through
 // the permutation when an epoch needs more samples than there are. A sample's randomness

@@ -1,5 +1,5 @@
 #pragma once
-// Train/test splits (SPEC 1.2) read from data_splits/*.yaml; the schema is documented at the
+// Train/test splits (METHOD 1.2) read from data_splits/*.yaml; the schema is documented at the
 // top of data_splits/zju_mocap.yaml.
 
 #include <filesystem>

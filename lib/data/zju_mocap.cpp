@@ -138,7 +138,7 @@ std::shared_ptr<HumanSequence> HumanSequence::open(const fs::path& dir) {
       Camera cam;
       cam.K = calib(cams["K"], c, {3, 3}, "K", file);
       cam.R = calib(cams["R"], c, {3, 3}, "R", file);
-      cam.T = calib(cams["T"], c, {3, 1}, "T", file) / 1000.0;  // SPEC 2.1: mm -> m
+      cam.T = calib(cams["T"], c, {3, 1}, "T", file) / 1000.0;  // METHOD 2.1: mm -> m
       cam.D = calib(cams["D"], c, {5, 1}, "D", file);
       h->cameras_.push_back(cam);
     }
@@ -288,7 +288,7 @@ ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOp
          rgb.cols, "x", rgb.rows);
   if (o.jitter) apply_jitter(rgb, *o.jitter);
 
-  const auto mark_band = [](cv::Mat& m) {  // SPEC 2.1 step 6: target mask only
+  const auto mark_band = [](cv::Mat& m) {  // METHOD 2.1 step 6: target mask only
     const cv::Mat kernel = cv::Mat::ones(5, 5, CV_8U);
     cv::Mat eroded, dilated;
     cv::erode(m, eroded, kernel);

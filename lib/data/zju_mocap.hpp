@@ -1,6 +1,6 @@
 #pragma once
-// ZJU-MoCap as users download it (SPEC 1.1), read straight from its folder layout, and the
-// per-view image preprocessing of SPEC 2.1. H36M (Animatable NeRF's preprocessing) has the same
+// ZJU-MoCap as users download it (METHOD 1.1), read straight from its folder layout, and the
+// per-view image preprocessing of METHOD 2.1. H36M (Animatable NeRF's preprocessing) has the same
 // layout per subject and is read by the same code (data/h36m.hpp).
 //
 // A human's folder holds:
@@ -82,14 +82,14 @@ class HumanSequence {
 // "CoreView_313_Camera_(1)_0001_2019-08-23_16-08-50.592.jpg" -> 1. -1 if it has none.
 int frame_number_of(const std::string& filename);
 
-// NHP's zju_rasterization layout of precomputed SMPL visibility (SPEC 1.1), as the reference
+// NHP's zju_rasterization layout of precomputed SMPL visibility (METHOD 1.1), as the reference
 // reads it: <root>/<human>/visibility/<camera folder>/<frame number>.npy, the number zero-padded
 // like the renamed images (an all-digit image name gives the width, e.g. 000123.jpg -> 6;
 // CoreView_313/315's original long names -> 4), whatever the image files are called.
 std::filesystem::path visibility_file(const std::filesystem::path& root, const HumanSequence& human,
                                       int frame, int camera);
 
-// One view after SPEC 2.1: undistorted, resized by `ratio`, background black.
+// One view after METHOD 2.1: undistorted, resized by `ratio`, background black.
 struct ViewImage {
   cv::Mat rgb;   // CV_32FC3, RGB in [0, 1]
   // CV_8U: 0 background, 1 person, 100 border band (target views only). With the band marked
@@ -102,7 +102,7 @@ struct ViewOptions {
   double ratio = 0.5;
   bool border_band = false;         // target views: mark dilate5x5 - erode5x5 with 100
   const JitterParams* jitter = nullptr;
-  // SPEC 2.1 step 6 [parity]: the band is marked on the distorted mask, which is then undistorted
+  // METHOD 2.1 step 6 [parity]: the band is marked on the distorted mask, which is then undistorted
   // (bilinear); false: marked on the undistorted mask (a clean 0/1/100 mask).
   bool band_before_undistort = true;
 };

@@ -1,5 +1,5 @@
 #pragma once
-// Camera geometry shared by the whole project (SPEC 2.2): rotations, world -> camera,
+// Camera geometry shared by the whole project (METHOD 2.2): rotations, world -> camera,
 // pinhole projection and OpenCV's lens distortion model. Everything else (ray generation,
 // visibility, the synthetic generator, free-viewpoint video) calls these instead of
 // re-deriving the formulas.

@@ -1,5 +1,5 @@
 #pragma once
-// numpy dtypes <-> torch scalar types, and raw array bytes <-> tensors (SPEC 1.4). Internal to
+// numpy dtypes <-> torch scalar types, and raw array bytes <-> tensors (METHOD 1.4). Internal to
 // lib/io: shared by the .npy reader/writer and the pickle reader/writer.
 
 #include <torch/types.h>

@@ -1,4 +1,4 @@
-// .npy (format 1.0/2.0/3.0) and .npz (SPEC 1.4), following numpy 1.24's lib/format.py.
+// .npy (format 1.0/2.0/3.0) and .npz (METHOD 1.4), following numpy 1.24's lib/format.py.
 #include "io/npy.hpp"
 
 #include <optional>

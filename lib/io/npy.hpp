@@ -1,5 +1,5 @@
 #pragma once
-// .npy and .npz files as numpy writes them (SPEC 1.4).
+// .npy and .npz files as numpy writes them (METHOD 1.4).
 //
 // Numeric arrays map to tensors of the matching dtype: f4->Float, f8->Double, i4->Int,
 // i8->Long, u1->Byte, b1->Bool, also f2->Half, i1->Char, i2->Short and, widened, u2->Int and

@@ -1,4 +1,4 @@
-// The pickle reader (SPEC 1.4): a stack machine over the opcodes, with its stack, marks and
+// The pickle reader (METHOD 1.4): a stack machine over the opcodes, with its stack, marks and
 // memo. What the opcodes build from globals (the whitelist, REDUCE, NEWOBJ, BUILD) is in
 // pickle_objects.cpp, the conversion of the result into a Value in pickle_convert.cpp.
 #include "io/pickle.hpp"

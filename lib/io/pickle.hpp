@@ -1,6 +1,6 @@
 #pragma once
 // A safe reader and writer for the subset of Python pickles that numpy and SMPL files use
-// (SPEC 1.4). Nothing read from a file is ever executed: globals outside a fixed whitelist are
+// (METHOD 1.4). Nothing read from a file is ever executed: globals outside a fixed whitelist are
 // refused with an error naming them, and every malformed or truncated input gives a th::Error
 // naming the file and the byte offset.
 //

@@ -1,4 +1,4 @@
-// Unpickled nodes -> Value (SPEC 1.4): containers with Python's key equality, object arrays
+// Unpickled nodes -> Value (METHOD 1.4): containers with Python's key equality, object arrays
 // as nested lists, scipy.sparse matrices densified, chumpy arrays as their `x`.
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-// What the pickle reader's opcodes build (SPEC 1.4): the whitelist of globals, REDUCE on the
+// What the pickle reader's opcodes build (METHOD 1.4): the whitelist of globals, REDUCE on the
 // whitelisted callables, NEWOBJ and BUILD (numpy arrays and dtypes, class instances).
 #include <algorithm>
 #include <cctype>

@@ -1,5 +1,5 @@
 // The pickle writer: CPython 3.11's C pickler (Modules/_pickle.c) replayed for the objects a
-// Value holds, with numpy 1.24's ndarray/dtype __reduce__ (SPEC 1.4). Every save() of CPython
+// Value holds, with numpy 1.24's ndarray/dtype __reduce__ (METHOD 1.4). Every save() of CPython
 // is one call here that starts with boundary() (where protocol 4 may close a FRAME), then
 // checks the memo, then writes the same opcodes and memo puts in the same order.
 #include "io/pickle_writer.hpp"

@@ -1,4 +1,4 @@
-// Value, the tree a pickle is read into and written from (SPEC 1.4).
+// Value, the tree a pickle is read into and written from (METHOD 1.4).
 #include <cmath>
 
 #include "core/error.hpp"

@@ -1,5 +1,5 @@
 #pragma once
-// Marching cubes on a dense scalar grid (SPEC 7: raw density at threshold 20, grid padded by 10
+// Marching cubes on a dense scalar grid (METHOD 7: raw density at threshold 20, grid padded by 10
 // zero cells, vertices in world coordinates), fed slab by slab so that memory stays bounded
 // for any grid: the density is evaluated by the network a z-slab at a time and only the last
 // z-slice and one layer of edge-vertex indices are kept here.
@@ -39,10 +39,10 @@ namespace th::mesh {
 // Where the samples lie in the world (see the layout above).
 struct GridSpec {
   std::array<double, 3> origin{0, 0, 0};  // world (x, y, z) of sample [0][0][0]
-  std::array<double, 3> voxel{1, 1, 1};   // spacing along x, y, z (metres; SPEC 7: 0.005)
+  std::array<double, 3> voxel{1, 1, 1};   // spacing along x, y, z (metres; METHOD 7: 0.005)
 };
 
-// A grid with its size: what the density is sampled on (SPEC 7: 5 mm over the frame's bounds).
+// A grid with its size: what the density is sampled on (METHOD 7: 5 mm over the frame's bounds).
 struct DenseGrid {
   GridSpec spec;
   int64_t depth = 0, height = 0, width = 0;  // D (z), H (y), W (x) samples
@@ -59,8 +59,8 @@ DenseGrid grid_over_bounds(const torch::Tensor& bounds, double voxel);
 torch::Tensor slab_points(const DenseGrid& grid, int64_t z0, int64_t d);
 
 struct MarchingCubesOptions {
-  double threshold = 0.0;  // SPEC 7: 20 on raw sigma
-  int pad = 0;             // cells of pad_value added on all six sides (SPEC 7: 10)
+  double threshold = 0.0;  // METHOD 7: 20 on raw sigma
+  int pad = 0;             // cells of pad_value added on all six sides (METHOD 7: 10)
   float pad_value = 0.f;   // must be <= threshold for the padding to close the surface
 };
 

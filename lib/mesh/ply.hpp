@@ -1,5 +1,5 @@
 #pragma once
-// Binary PLY files for the reconstructed meshes (SPEC 7): what MeshLab, Blender and Open3D read.
+// Binary PLY files for the reconstructed meshes (METHOD 7): what MeshLab, Blender and Open3D read.
 //
 // Written layout (binary_little_endian 1.0):
 //   element vertex V: property float x, y, z [, property uchar red, green, blue]
@@ -16,7 +16,7 @@ namespace th::mesh {
 // Written atomically (temporary file + rename). Throws th::Error naming the path if it cannot
 // be written. `comment` goes into the header (one line).
 void write_ply(const std::filesystem::path& path, const TriMesh& mesh,
-               const std::string& comment = "TransHuman-C++ marching cubes (SPEC 7)");
+               const std::string& comment = "TransHuman-C++ marching cubes (METHOD 7)");
 
 // Reads binary little-endian PLYs: a vertex element with x, y, z (float or double) and
 // optionally red, green, blue (uchar), other scalar properties skipped; a face element with a

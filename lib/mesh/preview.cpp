@@ -54,7 +54,7 @@ cv::Mat render_preview(const TriMesh& mesh, const PreviewCamera& camera,
     auto normals = geometry::vertex_normals(mesh.verts.to(torch::kFloat64), mesh.faces);
     auto n = render::interpolate(raster, mesh.faces, torch::matmul(normals, R.t()));
     n = n / n.norm(2, 2, true).clamp_min(1e-12);
-    // Unit viewing ray per pixel, K^-1 [x, y, 1] (SPEC 2.2's ray direction, camera frame).
+    // Unit viewing ray per pixel, K^-1 [x, y, 1] (METHOD 2.2's ray direction, camera frame).
     auto ys = torch::arange(h, torch::kFloat64), xs = torch::arange(w, torch::kFloat64);
     auto grid = torch::meshgrid({ys, xs}, "ij");
     auto pix = torch::stack({grid[1], grid[0], torch::ones_like(grid[0])}, 2);  // (H, W, 3)

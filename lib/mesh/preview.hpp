@@ -17,7 +17,7 @@ namespace th::mesh {
 
 struct PreviewCamera {
   torch::Tensor K;  // (3, 3) float64
-  torch::Tensor R;  // (3, 3) float64, world -> camera (SPEC 2.2)
+  torch::Tensor R;  // (3, 3) float64, world -> camera (METHOD 2.2)
   torch::Tensor T;  // (3, 1) float64, metres
   int width = 512;
   int height = 512;

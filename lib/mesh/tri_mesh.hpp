@@ -1,6 +1,6 @@
 #pragma once
 // The triangle mesh that marching cubes produces and the PLY writer, the preview renderer and
-// the mesh app consume (SPEC 7).
+// the mesh app consume (METHOD 7).
 
 #include <torch/types.h>
 

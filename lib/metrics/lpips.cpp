@@ -71,7 +71,7 @@ torch::Tensor LpipsImpl::forward(const torch::Tensor& a, const torch::Tensor& b)
   TORCH_CHECK(a.dim() == 4 && a.size(1) == 3 && a.sizes() == b.sizes(),
               "LPIPS inputs must be two (B, 3, H, W) tensors of one shape");
   auto x = (a - shift_) / scale_, y = (b - shift_) / scale_;
-  auto unit = [](const torch::Tensor& f) {  // SPEC 5: x / (sqrt(sum x^2 + 1e-10) + 1e-10)
+  auto unit = [](const torch::Tensor& f) {  // METHOD 5: x / (sqrt(sum x^2 + 1e-10) + 1e-10)
     return f / ((f.pow(2).sum(1, true) + 1e-10).sqrt() + 1e-10);
   };
   torch::Tensor total;

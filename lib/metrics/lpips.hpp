@@ -1,5 +1,5 @@
 #pragma once
-// LPIPS v0.1 with VGG16 features (SPEC 5, 6): the perceptual training loss and the evaluation
+// LPIPS v0.1 with VGG16 features (METHOD 5, 6): the perceptual training loss and the evaluation
 // metric. Weights come from a file the user converts once with scripts/export_lpips.py
 // (torchvision's VGG16 ImageNet weights + LPIPS v0.1 linear layers), an .npz with the keys
 //   features.{0,2,5,7,10,12,14,17,19,21,24,26,28}.{weight,bias}   VGG16 convolutions

@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 3.3: DPaRF, the deformable partial radiance fields. Each token owns a local frame
+// METHOD 3.3: DPaRF, the deformable partial radiance fields. Each token owns a local frame
 // (origin Oc = cluster mean of the posed vertices in the SMPL frame, axes Rc = cluster mean of
 // the blended rotations, not re-orthonormalised [parity]); a query point reads its Nk nearest
 // fields, weighted by softmax(-distance / T), each with its local coordinates encoded.
@@ -51,7 +51,7 @@ class DPaRF {
   const DPaRFConfig& config() const { return config_; }
 
  private:
-  bool fused() const { return config_.pe_rounding == "fused"; }  // SPEC 3.3 [parity]
+  bool fused() const { return config_.pe_rounding == "fused"; }  // METHOD 3.3 [parity]
   // Per-field encodings g_k: (N, Nk, G).
   torch::Tensor field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
                                 const torch::Tensor& index) const;

@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 3.4, first half: FDI fuses the human representation s_v with the appearance features
+// METHOD 3.4, first half: FDI fuses the human representation s_v with the appearance features
 // a_v of the reference views by a single-head cross-attention over views (query from s, keys
 // and values from a), then the shared trunk e_v = relu(fc_2(relu(fc_1(o_v)))).
 // Ablations: "w/o a" (fdi.appearance false): o_v = value1(s_v); "w/o h" (fdi.human false):

@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 3.4, second half: the density head (mean over views, fc_3, alpha_fc) and the colour head
+// METHOD 3.4, second half: the density head (mean over views, fc_3, alpha_fc) and the colour head
 // (feature_fc + rgb_res_0, view directions, view_fc, rgb_res_1, mean, fc_4, rgb_fc).
 // All layers are per-point Linear layers on rows (the reference's Conv1d k=1).
 

@@ -19,7 +19,7 @@ void TokenFieldsImpl::prepare(const FrameInputs& in, const PaintedBody& body, Hu
          config_.dparf.nk);
   stage.frames = t.frames;
   if (config_.exact_shortcuts) {
-    stage.table = token_table(t.features, fc_0);  // SPEC 9 (shortcuts.hpp)
+    stage.table = token_table(t.features, fc_0);  // METHOD 9 (shortcuts.hpp)
   } else {
     stage.tokens = t.features;
   }

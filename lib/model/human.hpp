@@ -1,6 +1,6 @@
 #pragma once
-// The human representation branch h of SPEC 3 (selected by model.representation):
-// - TokenFields: TransHE tokens (SPEC 3.2) read through DPaRF (SPEC 3.3) — the paper's model;
+// The human representation branch h of METHOD 3 (selected by model.representation):
+// - TokenFields: TransHE tokens (METHOD 3.2) read through DPaRF (METHOD 3.3) — the paper's model;
 // - SPCTrilinear (spc.hpp): the NHP-style baseline of the ablations.
 // Both end in fc_0 and return s_v = relu(fc_0(h_v)) per reference view.
 

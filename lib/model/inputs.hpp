@@ -9,18 +9,18 @@
 namespace th::model {
 
 struct FrameInputs {
-  torch::Tensor ref_images;  // (V, 3, H, W) float in [0, 1], background black (SPEC 2.1)
+  torch::Tensor ref_images;  // (V, 3, H, W) float in [0, 1], background black (METHOD 2.1)
   torch::Tensor K;           // (V, 3, 3) intrinsics at the working resolution
   torch::Tensor R;           // (V, 3, 3) world -> camera rotation
   torch::Tensor T;           // (V, 3, 1) world -> camera translation, metres
   torch::Tensor vertices;    // (Nv, 3) posed body vertices, world coordinates
   torch::Tensor Rh;          // (3, 3) global rotation matrix: x_smpl = Rh^T (x_world - Th)
   torch::Tensor Th;          // (3) global translation, metres
-  torch::Tensor A;           // (Nv, 3, 3) blended canonical -> posed rotations (SPEC 2.3)
+  torch::Tensor A;           // (Nv, 3, 3) blended canonical -> posed rotations (METHOD 2.3)
   torch::Tensor canonical;   // (Nv, 3) canonical vertices (v_template); float64 keeps the token
                              // positions, hence the high PE frequencies, as the reference's [parity]
-  torch::Tensor visibility;  // (V, Nv) bool, vertex visible in reference view v (SPEC 2.4)
-  torch::Tensor labels;      // (Nv) int64 token (cluster) of each vertex (SPEC 2.5)
+  torch::Tensor visibility;  // (V, Nv) bool, vertex visible in reference view v (METHOD 2.4)
+  torch::Tensor labels;      // (Nv) int64 token (cluster) of each vertex (METHOD 2.5)
   int64_t num_tokens = 0;    // number of clusters; 0: labels.max() + 1
 
   int64_t views() const { return ref_images.size(0); }

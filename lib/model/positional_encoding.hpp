@@ -1,5 +1,5 @@
 #pragma once
-// Sine-cosine encodings of SPEC 3.2 (tokens), 3.3 (local coordinates) and 3.4 (view
+// Sine-cosine encodings of METHOD 3.2 (tokens), 3.3 (local coordinates) and 3.4 (view
 // directions). The layout is the reference's: for each frequency, sin of x, y, z, then cos of
 // x, y, z; cos is evaluated as sin(x * f + pi/2) in the input's precision [parity].
 
@@ -14,12 +14,12 @@ torch::Tensor pe_phases(int64_t num_freqs, const torch::TensorOptions& options);
 
 // x: (N, 3) -> (N, [3 +] 6 * num_freqs): [x,] sin(f0 x), cos(f0 x), sin(f1 x), ...
 // Each value is sin(x * f + phase). `fused` (the default of model.transhe/dparf.pe_rounding,
-// SPEC 3.2 [parity]) rounds x * f + phase once, as the reference's torch.addcmul does with a
+// METHOD 3.2 [parity]) rounds x * f + phase once, as the reference's torch.addcmul does with a
 // fused multiply-add; otherwise the product and the sum are rounded separately (numpy).
 torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool include_input,
                               bool fused = false);
 
-// View-direction encoding gamma(d) (SPEC 3.4, NeRF's embedder, 4 octaves):
+// View-direction encoding gamma(d) (METHOD 3.4, NeRF's embedder, 4 octaves):
 // d: (N, 3) unit -> (N, 27) = [d, sin d, cos d, sin 2d, cos 2d, sin 4d, cos 4d, sin 8d, cos 8d].
 torch::Tensor direction_encoding(const torch::Tensor& d);
 constexpr int64_t kDirectionEncodingDim = 27;

@@ -1,5 +1,5 @@
 #pragma once
-// ImageNet ResNet-18 weights for the encoder (SPEC 3.1): an .npz with torchvision's resnet18
+// ImageNet ResNet-18 weights for the encoder (METHOD 3.1): an .npz with torchvision's resnet18
 // state dict names, written by scripts/export_pretrained.py. Checkpoints of whole models are read
 // by the pipeline library (pipeline/checkpoint.hpp, pipeline/reference_import.hpp).
 

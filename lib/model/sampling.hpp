@@ -1,6 +1,6 @@
 #pragma once
 // Exact bilinear sampling of feature maps that the reference upsamples to the image size
-// first (SPEC 3.1, 9): grid_sample(upsample_bilinear(map, (H, W), align_corners=true), uv,
+// first (METHOD 3.1, 9): grid_sample(upsample_bilinear(map, (H, W), align_corners=true), uv,
 // bilinear, border, align_corners=true) read directly from the (h, w) map, so the upsampled
 // (V, C, H, W) tensor is never materialised. Each point reads 3 x 3 texels of the low-resolution
 // map (2 x 2 when the map already has the image size).

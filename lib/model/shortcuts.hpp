@@ -1,11 +1,11 @@
 #pragma once
-// SPEC 9: the exact shortcuts, in one place. Each is a transformation of one stage of the
+// METHOD 9: the exact shortcuts, in one place. Each is a transformation of one stage of the
 // per-frame state (model/frame_cache.hpp), made once per frame, that leaves the rendered
 // function unchanged up to float rounding; model.exact_shortcuts: false keeps every stage in its
 // reference form (tests/model/test_shortcuts.cpp and test_formulas.cpp compare the two).
 // With each transformation, the per-point code that reads the transformed stage.
 //
-// Not a stage transformation, but exact as well and also part of SPEC 9, in transhuman.cpp:
+// Not a stage transformation, but exact as well and also part of METHOD 9, in transhuman.cpp:
 // during checkpointed training colour is evaluated only where sigma_raw > 0 (the compositing
 // weight is 0 elsewhere, so neither the image nor a gradient changes).
 

@@ -128,7 +128,7 @@ FrameTokens build_tokens(TransHEImpl* vit, const ModelConfig& config, const Fram
   t.keep = cluster_counts(labels, nt).nonzero().flatten();
   const auto weights = config.grouping.mean_over == "visible" ? in.visibility.to(device) : torch::Tensor();
   auto feats = cluster_mean(painted, labels, nt, weights).index_select(1, t.keep);
-  // SPEC 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
+  // METHOD 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
   // for the observation-space ablation, from the posed body in the SMPL frame.
   const auto& source = config.transhe.position == "canonical" ? in.canonical : body.xs_vertices;
   const auto means = cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);

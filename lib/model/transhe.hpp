@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 3.2: TransHE. Painted vertex features are averaged per token (cluster), the canonical
+// METHOD 3.2: TransHE. Painted vertex features are averaged per token (cluster), the canonical
 // token positions are sine-cosine encoded, and a ViT-Tiny (timm layout and names) processes
 // each view's token sequence independently.
 
@@ -74,7 +74,7 @@ TORCH_MODULE(TransHE);
 // The tokens of one frame: the painted body averaged per token (cluster), the token positions
 // (canonical cluster means, float64 [parity], or the posed body's for the observation-space
 // ablation) normalised for the PE, TransHE over each view's tokens (`vit` null: the "w/o
-// TransHE" ablation keeps the means), and each token's DPaRF frame (SPEC 3.3). Clusters
+// TransHE" ablation keeps the means), and each token's DPaRF frame (METHOD 3.3). Clusters
 // without vertices (possible with grid groupings) have no token.
 struct FrameTokens {
   torch::Tensor features;   // T_v after the transformer: (V, Nt, C)

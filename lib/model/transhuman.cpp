@@ -60,7 +60,7 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   geo.Th = in.Th.to(opts).reshape({3});
   geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance_);
 
-  // Encoder (SPEC 3.1).
+  // Encoder (METHOD 3.1).
   EncodedViews enc;
   {
     ScopedTimer timer(profile_, "encoder");
@@ -100,7 +100,7 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   if (config_.fdi.appearance) {
     auto& px = cache.pixels;
     if (config_.exact_shortcuts) {
-      // SPEC 9; on CPU without a gradient (inference) in the window form
+      // METHOD 9; on CPU without a gradient (inference) in the window form
       if (config_.readout_windows && !torch::GradMode::is_enabled() && opts.device().is_cpu() && cull_distance_ > 0) {
         const auto windows = body_windows(geo, in.vertices, cull_distance_, enc.geometry);
         make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px, &windows);
@@ -135,7 +135,7 @@ torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadou
   const auto n = uv.size(0), V = uv.size(1);
   const auto flat = uv.reshape({-1, 2});
   const auto view = view_ids(n, V, uv.device());
-  if (readout.window_table.defined()) {  // SPEC 9 readout windows
+  if (readout.window_table.defined()) {  // METHOD 9 readout windows
     const auto [taps, inside] = px.windows.taps(flat, view, px.geometry.height, px.geometry.width);
     auto out = weighted_gather(readout.window_table, taps);
     if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels

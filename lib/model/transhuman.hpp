@@ -1,5 +1,5 @@
 #pragma once
-// The composed TransHuman network (SPEC 3): encoder -> painting -> human representation
+// The composed TransHuman network (METHOD 3): encoder -> painting -> human representation
 // (TransHE + DPaRF, or the SPC baseline) -> FDI -> heads. Per-frame work happens once in
 // prepare(); forward() evaluates points. The components are chosen by the ModelConfig.
 
@@ -57,7 +57,7 @@ class TransHumanImpl : public torch::nn::Module {
 
  private:
   // Per chunk of points, FDI's inputs: the human representation s_v (DPaRF, or SPC) and the
-  // appearance a_v sampled at the points' projections uv (SPEC 3.3, 3.4).
+  // appearance a_v sampled at the points' projections uv (METHOD 3.3, 3.4).
   struct PointFeatures {
     torch::Tensor s, a;  // (N, V, 256) each; undefined when the branch is off (ablations)
     torch::Tensor uv;    // (N, V, 2) projections into the reference views
@@ -126,7 +126,7 @@ render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCach
 render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
                                  const RenderConfig& config, render::Profile* profile = nullptr);
 
-// Active parameters per module (SPEC 3.4): encoder (ResNet-18 to layer2), reduction + colour,
+// Active parameters per module (METHOD 3.4): encoder (ResNet-18 to layer2), reduction + colour,
 // ViT (or the SPC network), heads (fc_0, FDI and heads), and "total" last.
 struct ParameterCount {
   std::string module;

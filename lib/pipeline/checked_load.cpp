@@ -182,7 +182,7 @@ void check_loaded_tensor(const torch::Tensor& t, const std::string& source, cons
 }
 
 ParameterKeys config_keys_for(const std::string& name) {
-  // Our dotted module paths (SPEC 8 names the reference's), most specific first.
+  // Our dotted module paths (METHOD 8 names the reference's), most specific first.
   static const std::vector<std::pair<std::string, ParameterKeys>> table = {
       {"human.ViT.blocks.", {"model.transhe.depth", "model.transhe.dim / model.transhe.mlp_dim"}},
       {"human.ViT.", {"model.transhe.enabled", "model.transhe.dim"}},

@@ -1,5 +1,5 @@
 #pragma once
-// Reading weights without trusting the file (SPEC 8): a checkpoint is a zip of stored records
+// Reading weights without trusting the file (METHOD 8): a checkpoint is a zip of stored records
 // whose tensors are views into them. Before a value is copied into the model, the archive's
 // members must lie inside the file, storage records must be stored (PyTorch and LibTorch never
 // compress them) and LibTorch's small compressed code files are bounded, so the file cannot

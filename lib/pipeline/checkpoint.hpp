@@ -1,5 +1,5 @@
 #pragma once
-// Every checkpoint this project reads or writes (SPEC 5, 8):
+// Every checkpoint this project reads or writes (METHOD 5, 8):
 // - a training checkpoint (.pt, torch::serialize archive): model weights and buffers, the model
 //   config that trained them, Adam's state and the run's position; written atomically, read
 //   checked (pipeline/checked_load.hpp), also sent as bytes from rank 0 to the other ranks;
@@ -41,7 +41,7 @@ CheckpointState restore_checkpoint_bytes(const std::string& bytes, model::TransH
                                          torch::optim::Adam& optim, const std::string& source);
 
 // Loads the weights of a checkpoint into `model`: ours (.pt, written by training) or the
-// reference implementation's (.pth, SPEC 8). Every tensor is checked (checked_load.hpp); a
+// reference implementation's (.pth, METHOD 8). Every tensor is checked (checked_load.hpp); a
 // checkpoint trained with other model.* values is refused naming them, or with
 // `allow_model_mismatch` (eval.model_mismatch: warn) loaded with a warning. Throws th::Error
 // naming the file.

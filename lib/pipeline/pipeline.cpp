@@ -82,7 +82,7 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   r.rays = result.acc.numel();
   r.opaque_1e3 = (1 - result.acc.to(torch::kDouble) < 1e-3).sum().item<int64_t>();
   r.opaque_1e4 = (1 - result.acc.to(torch::kDouble) < 1e-4).sum().item<int64_t>();
-  r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (SPEC 6)
+  r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (METHOD 6)
   const int64_t H = sample.target_image.size(0), W = sample.target_image.size(1);
   r.pred = scatter_image(rgb, sample.ray_pixel, H, W);
   r.gt = sample.target_image * sample.box_mask.unsqueeze(-1);

@@ -30,7 +30,7 @@ class Tokens {
 };
 
 // Sample -> FrameInputs on `device` (float32, except `canonical`, passed on in its own dtype:
-// v_template in float64 gives the token positions of the reference [parity], SPEC 3.2).
+// v_template in float64 gives the token positions of the reference [parity], METHOD 3.2).
 model::FrameInputs frame_inputs(const data::Sample& sample, const torch::Tensor& canonical,
                                 const torch::Tensor& labels, const torch::Device& device);
 
@@ -65,7 +65,7 @@ class FrameReuse {
   int64_t prepared_ = 0, reused_ = 0;
 };
 
-// A test view rendered and scored with the protocol of SPEC 6: PSNR over the valid rays, SSIM
+// A test view rendered and scored with the protocol of METHOD 6: PSNR over the valid rays, SSIM
 // and LPIPS (when `lpips` is given; NaN otherwise) on the crop to the valid-ray rectangle.
 struct ViewResult {
   double psnr = 0, ssim = 0, lpips = std::numeric_limits<double>::quiet_NaN();

@@ -32,7 +32,7 @@ void flatten(const Value& v, const std::string& prefix, std::map<std::string, to
   }
 }
 
-// Reference names of the parts this model has (SPEC 8).
+// Reference names of the parts this model has (METHOD 8).
 const std::vector<std::pair<std::string, std::string>>& renames() {
   static const std::vector<std::pair<std::string, std::string>> r = {
       {"human.ViT.", "ViT."},
@@ -191,7 +191,7 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
   };
   for (auto& p : model.named_parameters()) visit(p.key(), p.value());
   for (auto& b : model.named_buffers()) visit(b.key(), b.value());
-  // What the reference holds but does not use (SPEC 8) is skipped; any other key means the file
+  // What the reference holds but does not use (METHOD 8) is skipped; any other key means the file
   // is not what it claims to be (another network or version), so nothing is copied.
   static const char* const kUnused[] = {"encoder.model.layer3.", "encoder.model.layer4.", "encoder.model.fc.",
                                         "ViT.cls_token", "ViT.mask_token", "xyzc_net.",

@@ -1,5 +1,5 @@
 #pragma once
-// Checkpoints of the reference implementation (SPEC 8): .pth files in PyTorch's zip format
+// Checkpoints of the reference implementation (METHOD 8): .pth files in PyTorch's zip format
 // (data.pkl + data/<storage> records), read without executing anything, and their tensors copied
 // into our model under our names.
 
@@ -33,13 +33,13 @@ struct ImportReport {
   std::vector<std::string> ignored;  // the reference's known unused parts present in the file
 };
 
-// The reference name of each model parameter/buffer (SPEC 8), e.g. "fdi.key0.weight" ->
+// The reference name of each model parameter/buffer (METHOD 8), e.g. "fdi.key0.weight" ->
 // "spatial_key_value_0.key_embed.weight"; Conv1d weights (out, in, 1) become Linear (out, in).
 std::string reference_name(const std::string& model_name);
 
 // Copies a reference state dict into the model. Throws th::Error naming the first missing or
 // mis-shaped key, a key holding integers or booleans where the model has weights, or a key the
-// reference network does not have (its known unused parts, SPEC 8, are skipped), and the
+// reference network does not have (its known unused parts, METHOD 8, are skipped), and the
 // source; nothing is modified then.
 ImportReport import_reference_state(model::TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source);

@@ -1,8 +1,8 @@
 #pragma once
-// "Is any body vertex within r of this point?" for the distance culling of SPEC 4 (progressive
+// "Is any body vertex within r of this point?" for the distance culling of METHOD 4 (progressive
 // rendering) and 7 (mesh extraction), answered from a uniform grid of cell size r built once per
 // frame: a point only needs the vertices of its own and the 26 neighbouring cells, never an
-// N x Nv distance matrix (SPEC 9).
+// N x Nv distance matrix (METHOD 9).
 
 #include <torch/types.h>
 

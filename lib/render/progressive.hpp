@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 4 progressive rendering (inference; the paper's appendix): samples farther than the
+// METHOD 4 progressive rendering (inference; the paper's appendix): samples farther than the
 // culling distance from every body vertex are skipped (raw = 0), rays without any kept sample
 // output 0, and the colour branch runs only where sigma_raw > 0. The image equals full
 // rendering of the same field wherever the field's density is not positive beyond the

@@ -1,10 +1,10 @@
 #pragma once
 // A CPU triangle z-buffer rasteriser: for each pixel, the nearest triangle, its depth and its
 // perspective-correct barycentric coordinates. Used by the synthetic data generator (images
-// and masks) and for the visibility of SMPL vertices per view (SPEC 2.4).
+// and masks) and for the visibility of SMPL vertices per view (METHOD 2.4).
 //
 // Pixel (x, y) samples the point with pinhole coordinates exactly (x, y), i.e. pixel centres
-// at integer coordinates, the convention of OpenCV and of the rays of SPEC 2.2. Triangles are
+// at integer coordinates, the convention of OpenCV and of the rays of METHOD 2.2. Triangles are
 // two-sided unless listed in RasterOptions::cull. Triangles with a vertex closer than `near` to
 // the camera plane are skipped (no clipping: the scenes here never reach the camera).
 

@@ -1,5 +1,5 @@
 #pragma once
-// Internal to lib/render: the per-sample lengths of SPEC 4's compositing, shared by composite()
+// Internal to lib/render: the per-sample lengths of METHOD 4's compositing, shared by composite()
 // and the early-termination march of progressive rendering (which must use the same ones).
 
 #include <torch/types.h>

@@ -1,5 +1,5 @@
 #pragma once
-// SPEC 4: samples along rays, volume compositing, and the renderer that evaluates a radiance
+// METHOD 4: samples along rays, volume compositing, and the renderer that evaluates a radiance
 // field in chunks (bounded memory for any number of rays).
 
 #include <torch/types.h>
@@ -18,7 +18,7 @@ class BodyDistance;
 
 struct Rays {
   torch::Tensor origins;     // (R, 3) world
-  torch::Tensor directions;  // (R, 3) world, not normalised (t is camera depth, SPEC 2.2)
+  torch::Tensor directions;  // (R, 3) world, not normalised (t is camera depth, METHOD 2.2)
   torch::Tensor near, far;   // (R)
 
   int64_t size() const { return origins.size(0); }
@@ -63,7 +63,7 @@ class RadianceField {
   // pts, dirs: (N, 3) world sample positions and their rays' directions -> raw (N, 4).
   virtual torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) = 0;
   // As raw(), but the colour is evaluated only where sigma_raw > 0 (zero logits elsewhere):
-  // such samples get zero weight, so the image is the same (SPEC 4, progressive rendering).
+  // such samples get zero weight, so the image is the same (METHOD 4, progressive rendering).
   virtual torch::Tensor raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) {
     return raw(pts, dirs);
   }
@@ -81,7 +81,7 @@ struct Composite {
   torch::Tensor weights;  // (R, S)
 };
 
-// SPEC 4 compositing: delta_i = (z_{i+1} - z_i) |d| (last: 1e10 |d|), alpha = 1 - exp(-relu(sigma)
+// METHOD 4 compositing: delta_i = (z_{i+1} - z_i) |d| (last: 1e10 |d|), alpha = 1 - exp(-relu(sigma)
 // delta), T_i = prod_{j<i} (1 - alpha_j + 1e-10), w = alpha T; rgb = sum w sigmoid(rgb_raw),
 // depth = sum w z, acc = sum w; black background.
 // raw: (R, S, 4), z: (R, S), directions: (R, 3).

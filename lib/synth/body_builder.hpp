@@ -1,5 +1,5 @@
 #pragma once
-// The synthetic body model in SMPL's form (SPEC 1.5): 24 joints with SMPL's kinematic tree and
+// The synthetic body model in SMPL's form (METHOD 1.5): 24 joints with SMPL's kinematic tree and
 // names, a T-pose template (y up, x to the body's left, z forward, metres, about 1.75 m tall,
 // pelvis joint at the origin), smooth LBS weights, 10 shape directions with a meaning, zero
 // pose blend shapes and a J_regressor whose rows average rings of vertices.

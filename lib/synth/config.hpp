@@ -11,7 +11,7 @@ namespace th::synth {
 
 struct SynthPeopleConfig {
   // Folder names; training people first. CoreView_313/315 get the 21-camera layout with
-  // original-style long file names, CoreView_396 the params/ + vertices/ folders (SPEC 1.1).
+  // original-style long file names, CoreView_396 the params/ + vertices/ folders (METHOD 1.1).
   std::vector<std::string> train{"CoreView_313", "CoreView_315", "CoreView_396", "CoreView_s04",
                                  "CoreView_s05", "CoreView_s06", "CoreView_s07"};
   std::vector<std::string> unseen{"CoreView_s08", "CoreView_s09", "CoreView_s10"};

@@ -110,7 +110,7 @@ struct Recording {
   torch::Tensor published_shapes;      // (10)
 };
 
-// Published = true parameters + a fitting error (SPEC: the fitted body is not exact).
+// Published = true parameters + a fitting error (the fitted body is not exact).
 FrameParams add_noise(const FrameParams& truth, const SynthNoiseConfig& n, Rng& rng) {
   FrameParams out = truth;
   if (!n.enabled) return out;
@@ -191,7 +191,7 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   fs::create_directories(out);
   LibraryThreads library_threads(1);
 
-  // The body model (SPEC 1.5), written in both formats. Its pose blend shapes are zero and
+  // The body model (METHOD 1.5), written in both formats. Its pose blend shapes are zero and
   // are stored as float32, which halves the largest array (readers convert to float64).
   const BodyTemplate body = build_body_template();
   body::SmplModel stored = body.model;
@@ -310,7 +310,7 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
       cv::Mat mask = coverage / 255;      // ZJU-MoCap masks are 0/1
       if (r.person.masks == MaskStyle::Both) {
         // Two parsers that each miss something: the matting misses hair and shoes, the part
-        // parser is tighter at the edges; the loader's union restores the person (SPEC 2.1).
+        // parser is tighter at the edges; the loader's union restores the person (METHOD 2.1).
         cv::Mat missed = (v.labels == cihp::kHair) | (v.labels == cihp::kLeftShoe) |
                          (v.labels == cihp::kRightShoe);
         mask.setTo(0, missed);
@@ -340,7 +340,7 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   });
   progress.finish();
 
-  // annots.npy per person (SPEC 1.1): cams {K, R, T (mm), D} and ims [{ims: [paths]}].
+  // annots.npy per person (METHOD 1.1): cams {K, R, T (mm), D} and ims [{ims: [paths]}].
   for (int i = 0; i < P; ++i) {
     const Recording& r = recs[i];
     io::Value::List K, R, T, D, ims;

@@ -1,6 +1,6 @@
 #pragma once
 // transhuman-synth's library side: writes a synthetic multi-view human dataset in the exact
-// ZJU-MoCap layout (SPEC 1.1) with its body model (SPEC 1.5) and split file (SPEC 1.2).
+// ZJU-MoCap layout (METHOD 1.1) with its body model (METHOD 1.5) and split file (METHOD 1.2).
 //
 // <out>/smpl_model.npz, smpl_model.pkl      the body model (np.savez / SMPL-style pickle)
 // <out>/<Human>/annots.npy                  cams {K, R, T (mm), D}, ims [{ims: [paths]}]

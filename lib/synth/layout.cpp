@@ -44,7 +44,7 @@ std::string FolderLayout::mask_path(const std::string& kind, int frame, int came
 }
 
 std::string FolderLayout::params_path(int frame) const {
-  // 313/315: 0001.jpg <-> params/1.npy (SPEC 1.1).
+  // 313/315: 0001.jpg <-> params/1.npy (METHOD 1.1).
   const int i = style_ == FolderStyle::Original21 ? frame + 1 : frame;
   return std::string(style_ == FolderStyle::Params396 ? "params/" : "new_params/") +
          std::to_string(i) + ".npy";

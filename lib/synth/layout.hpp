@@ -1,5 +1,5 @@
 #pragma once
-// File names of one human's folder in the ZJU-MoCap layout (SPEC 1.1), in its three
+// File names of one human's folder in the ZJU-MoCap layout (METHOD 1.1), in its three
 // variants: the usual Camera_B{n}/{frame:06d}.jpg + new_params/; CoreView_313/315's
 // "Camera (k)" folders with the original long names and 1-based frames; CoreView_396's
 // params/ + vertices/.

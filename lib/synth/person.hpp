@@ -29,7 +29,7 @@ struct RenderMesh {
   int64_t num_body_vertices = 0;       // the first vertices are the body model's own
 };
 
-// How the person's folder is laid out (SPEC 1.1).
+// How the person's folder is laid out (METHOD 1.1).
 enum class FolderStyle {
   Standard,    // Camera_B{n}/{frame:06d}.jpg, new_params/, new_vertices/, 23 cameras
   Original21,  // CoreView_313/315: "Camera (k)" folders, long original names, 21 cameras

@@ -66,7 +66,7 @@ StudioView make_studio_view(const CameraCalib& cam, const std::pair<cv::Mat, cv:
   view.background.create(height, width, CV_8UC3);
   view.floor_xy.create(height, width, CV_32FC2);
   auto centre = geometry::camera_center(cam.R, cam.T).contiguous();
-  // Ray direction through pinhole pixel (x, y): R^T K^-1 (x, y, 1) (SPEC 2.2).
+  // Ray direction through pinhole pixel (x, y): R^T K^-1 (x, y, 1) (METHOD 2.2).
   auto M = torch::matmul(cam.R.transpose(0, 1), torch::inverse(cam.K)).contiguous();
   const double* m = M.data_ptr<double>();
   const double* c = centre.data_ptr<double>();

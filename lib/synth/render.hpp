@@ -4,7 +4,7 @@
 // supersample^2 coverage samples per pixel (shaded once per visible surface per pixel, as in
 // multisample anti-aliasing), composited over a studio background (floor, walls, a contact
 // shadow) and passed through the camera's lens distortion, so that cv::undistort(img, K, D)
-// gives back the pinhole image (SPEC 2.1). Masks come from the coverage.
+// gives back the pinhole image (METHOD 2.1). Masks come from the coverage.
 
 #include <torch/types.h>
 

@@ -28,7 +28,7 @@ std::vector<CameraCalib> recalibrate(const std::vector<CameraCalib>& ring,
                                      const std::vector<int>& indices,
                                      const SynthCameraConfig& config, Rng& rng);
 
-// Ring positions of CoreView_313/315's cameras: of 23, 0..18, 21, 22 (SPEC 1.1); of other
+// Ring positions of CoreView_313/315's cameras: of 23, 0..18, 21, 22 (METHOD 1.1); of other
 // ring sizes likewise all but the fourth- and third-last.
 std::vector<int> cameras_21(int count);
 

@@ -35,7 +35,7 @@ std::string split_yaml(const SynthConfig& c) {
   const int train = std::min(c.split.train_frames, c.frames);
 
   std::ostringstream o;
-  o << "# Splits of the synthetic dataset: the protocols of SPEC 1.2 over the people and frames\n"
+  o << "# Splits of the synthetic dataset: the protocols of METHOD 1.2 over the people and frames\n"
        "# that transhuman-synth generates. Written by it: this copy is the split of\n"
        "# configs/synth/default.yaml; every generated dataset also holds its own split.yaml.\n"
        "#\n"

@@ -1,5 +1,5 @@
 #pragma once
-// The split file of a synthetic dataset: the paper's protocols (SPEC 1.2) over the generated
+// The split file of a synthetic dataset: the paper's protocols (METHOD 1.2) over the generated
 // people and frames. data_splits/synthetic.yaml is this file for configs/synth/default.yaml;
 // every generated dataset also carries its own copy as <out>/split.yaml.
 //

@@ -96,7 +96,7 @@ TEST_CASE("the grouping kind of the config selects the implementation", "[groupi
 }
 
 TEST_CASE("the reference's k-means file (numpy-scalar dict keys) loads with numpy's labels", "[grouping][parity]") {
-  // SPEC 2.5: kmeans_dict_300.npy as the reference ships it; np.save of a dict whose
+  // METHOD 2.5: kmeans_dict_300.npy as the reference ships it; np.save of a dict whose
   // dict_voxel2pc_ind is keyed by numpy.int32 scalars (refused as unhashable before).
   const auto dir = th::test::scratch_dir("kmeans_reference_file");
   const int64_t nv = 300, clusters = 24;

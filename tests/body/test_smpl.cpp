@@ -127,7 +127,7 @@ TEST_CASE("skin_points with the body's own weights reproduces lbs vertices", "[b
   CHECK(torch::allclose(skin_points(r.v_shaped, m.weights, r.G), r.vertices, 0, 1e-12));
 }
 
-TEST_CASE("smpl_to_world and world_to_smpl are inverse (SPEC 2.2)", "[body]") {
+TEST_CASE("smpl_to_world and world_to_smpl are inverse (METHOD 2.2)", "[body]") {
   torch::manual_seed(11);
   auto pts = torch::randn({20, 3}, torch::kFloat64);
   auto Rh = torch::tensor({{0.3, -1.2, 0.4}}, torch::kFloat64);

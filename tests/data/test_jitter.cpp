@@ -1,4 +1,4 @@
-// Colour jitter (SPEC 2.1): one set of parameters per training sample, shared by the target and
+// Colour jitter (METHOD 2.1): one set of parameters per training sample, shared by the target and
 // every reference view; none at test time.
 #include <catch2/catch.hpp>
 

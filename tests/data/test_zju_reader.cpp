@@ -275,7 +275,7 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
 }
 
 TEST_CASE("the target mask's border band is marked before undistortion, as the reference does", "[dataset][parity]") {
-  // SPEC 2.1 step 6 [parity]: band on the distorted mask, then both undistorted (bilinear), so
+  // METHOD 2.1 step 6 [parity]: band on the distorted mask, then both undistorted (bilinear), so
   // edge pixels hold blends of 0, 1 and 100; the background is black where the result is 0.
   const fs::path root = copy_of_tiny("band_parity");
   const fs::path dir = root / "CoreView_s03";

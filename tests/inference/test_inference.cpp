@@ -74,7 +74,7 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   th::pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
   const auto inputs = th::pipeline::frame_inputs(s, smpl->v_template,
                                               tokens.labels(s.body), torch::kCPU);
-  // Token positions come from v_template in float64, as the reference's do (SPEC 3.2 [parity]).
+  // Token positions come from v_template in float64, as the reference's do (METHOD 3.2 [parity]).
   CHECK(prepared.inputs.canonical.scalar_type() == torch::kDouble);
   const auto expected = th::pipeline::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
   CHECK(torch::equal(image, expected.pred));

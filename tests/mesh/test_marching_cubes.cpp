@@ -1,4 +1,4 @@
-// Marching cubes (SPEC 7) on analytic fields: closed, consistently oriented, welded meshes whose
+// Marching cubes (METHOD 7) on analytic fields: closed, consistently oriented, welded meshes whose
 // area, volume and genus match the analytic shapes; slab-by-slab equals whole-grid extraction.
 
 #include <torch/torch.h>
@@ -176,7 +176,7 @@ TEST_CASE("padding closes surfaces cut by the grid boundary and keeps world coor
   const TriMesh open = th::mesh::marching_cubes(field, g, {0.0, 0});
   CHECK(th::test::topology(open).boundary_edges > 0);
 
-  const TriMesh closed = th::mesh::marching_cubes(field, g, {0.0, 10});  // SPEC 7: 10 cells
+  const TriMesh closed = th::mesh::marching_cubes(field, g, {0.0, 10});  // METHOD 7: 10 cells
   const auto top = th::test::topology(closed);
   CHECK(top.closed());
   CHECK(top.oriented());

@@ -1,4 +1,4 @@
-// Binary PLY writer and reader (SPEC 7 meshes).
+// Binary PLY writer and reader (METHOD 7 meshes).
 
 #include <torch/torch.h>
 
@@ -48,7 +48,7 @@ TEST_CASE("PLY round trip with and without vertex colours", "[mesh][ply]") {
     const std::string header =
         std::string(
             "ply\nformat binary_little_endian 1.0\n"
-            "comment TransHuman-C++ marching cubes (SPEC 7)\n"
+            "comment TransHuman-C++ marching cubes (METHOD 7)\n"
             "element vertex 4\nproperty float x\nproperty float y\nproperty float z\n") +
         (colored ? "property uchar red\nproperty uchar green\nproperty uchar blue\n" : "") +
         "element face 4\nproperty list uchar int vertex_indices\nend_header\n";

@@ -12,7 +12,7 @@ using namespace th::model;
 
 namespace {
 
-// Voxel-grid labels (the grid groupings of SPEC 2.5): many voxel ids stay empty.
+// Voxel-grid labels (the grid groupings of METHOD 2.5): many voxel ids stay empty.
 torch::Tensor grid_labels(const torch::Tensor& points, double cell) {
   const auto p = points.to(torch::kDouble);
   const auto c = ((p - std::get<0>(p.min(0))) / cell).floor().to(torch::kLong);

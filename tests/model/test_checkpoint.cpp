@@ -1,4 +1,4 @@
-// Importing checkpoints of the reference implementation (SPEC 8) written by Debian's
+// Importing checkpoints of the reference implementation (METHOD 8) written by Debian's
 // python3-torch, pretrained encoder weights, and our own weights.
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
@@ -74,7 +74,7 @@ TEST_CASE("a reference .pth imports with equal tensors", "[model][checkpoint]") 
     }
     CHECK(compared == static_cast<int>(model->named_parameters().size()));
   }
-  // The name map of SPEC 8.
+  // The name map of METHOD 8.
   CHECK(reference_name("fdi.key0.weight") == "spatial_key_value_0.key_embed.weight");
   CHECK(reference_name("fdi.value1.bias") == "spatial_key_value_1.value_embed.bias");
   CHECK(reference_name("human.ViT.blocks.3.attn.qkv.weight") == "ViT.blocks.3.attn.qkv.weight");
@@ -157,7 +157,7 @@ TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip
 }
 
 TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", "[model][checkpoint][parity]") {
-  // SPEC 3.2 [parity]: PyTorch's addcmul rounds x * f + phase once; at frequencies up to
+  // METHOD 3.2 [parity]: PyTorch's addcmul rounds x * f + phase once; at frequencies up to
   // 2^31 pi that decides the value. The table here is computed by the installed PyTorch.
   torch::manual_seed(2);
   const auto x = (torch::rand({300, 3}) * 2 - 1) * 0.9;
@@ -176,7 +176,7 @@ TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", 
 }
 
 TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end", "[model][checkpoint][parity]") {
-  // The Python side (tests/python/model_reference.py render, written from SPEC.md in PyTorch)
+  // The Python side (tests/python/model_reference.py render, written from docs/METHOD.md in PyTorch)
   // loads the .pth that torch.save wrote and renders the rays of a small frame; the C++ import of
   // the same file, with the default configuration, must give the same density, colour, acc and
   // depth per ray.

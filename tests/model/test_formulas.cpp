@@ -1,4 +1,4 @@
-// Formulas of SPEC 3 and 4 against independent values from tests/python/model_reference.py
+// Formulas of METHOD 3 and 4 against independent values from tests/python/model_reference.py
 // (numpy, torchvision, and the reference code's torch idioms).
 #include <catch2/catch.hpp>
 #include <torch/torch.h>

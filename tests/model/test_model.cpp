@@ -39,7 +39,7 @@ torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& fra
 
 }  // namespace
 
-TEST_CASE("the default configuration has 6,922,244 active parameters (SPEC 3.4)", "[model][params]") {
+TEST_CASE("the default configuration has 6,922,244 active parameters (METHOD 3.4)", "[model][params]") {
   TransHuman model(ModelConfig{});
   const auto counts = parameter_counts(*model);
   CHECK(count_of(counts, "encoder (ResNet-18 to layer2)") == 683072);

@@ -1,4 +1,4 @@
-// The exact shortcuts of SPEC 9 against the direct computation they replace.
+// The exact shortcuts of METHOD 9 against the direct computation they replace.
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
 
@@ -113,7 +113,7 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
   }
 }
 
-TEST_CASE("the model with SPEC 9 shortcuts equals the direct computation", "[model][shortcuts]") {
+TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[model][shortcuts]") {
   const auto frame = test::synthetic_frame();
   auto cfg = test::tiny_model_config();
   for (auto variant : {"default", "no_coordinate", "absolute", "wo_a", "wo_h", "wo_rgb", "spc"}) {

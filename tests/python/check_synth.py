@@ -1,5 +1,5 @@
 """Checks a dataset written by transhuman-synth with numpy/scipy alone (no project code):
-the ZJU-MoCap structure of SPEC 1.1, the body model files, the camera ring, and, for a dataset
+the ZJU-MoCap structure of METHOD 1.1, the body model files, the camera ring, and, for a dataset
 generated with noise.enabled=false, that the published vertices projected with the published
 cameras (and OpenCV's distortion model, implemented here) fall inside the masks.
 
@@ -70,7 +70,7 @@ def distort(xy, D):
 
 
 def mask_of(human_dir, image_path):
-    """Union of mask/ and mask_cihp/ (SPEC 2.1); None when neither exists."""
+    """Union of mask/ and mask_cihp/ (METHOD 2.1); None when neither exists."""
     stem = os.path.splitext(image_path)[0] + ".png"
     union = None
     for kind in ("mask", "mask_cihp"):

@@ -1,4 +1,4 @@
-"""Independent numpy LBS (SPEC 2.3) for tests/body: reads a body model (.npz as np.savez wrote
+"""Independent numpy LBS (METHOD 2.3) for tests/body: reads a body model (.npz as np.savez wrote
 it, or SMPL's pickled .pkl with a scipy.sparse J_regressor) and a batch of poses/shapes, writes
 the per-vertex transforms A, joint transforms G, joints and posed vertices.
 

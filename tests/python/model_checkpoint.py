@@ -1,4 +1,4 @@
-"""Writes .pth files shaped like the reference implementation's checkpoints (SPEC 8), with random
+"""Writes .pth files shaped like the reference implementation's checkpoints (METHOD 8), with random
 values, using Debian's python3-torch; and the expected tensors as raw arrays for the C++ test.
 
 Usage: model_checkpoint.py <dir>

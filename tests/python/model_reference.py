@@ -1,9 +1,9 @@
-"""Independent reference values for the network and renderer formulas (SPEC 3, 4).
+"""Independent reference values for the network and renderer formulas (METHOD 3, 4).
 
 Usage: model_reference.py <command> <dir>
 Inputs and outputs are raw little-endian arrays listed in <dir>/manifest.txt (inputs, written
 by the C++ test) and <dir>/out_manifest.txt (outputs), one line "name dtype d0 d1 ...".
-Each formula is written here from SPEC.md (numpy, or the reference code's torch idiom where the
+Each formula is written here from docs/METHOD.md (numpy, or the reference code's torch idiom where the
 point is to reproduce an axis convention), never from the C++ code under test.
 """
 import math
@@ -36,7 +36,7 @@ def write_all(d, arrays):
 
 
 def sincos(x, num_freqs, include_input):
-    """SPEC 3.2: [x,] sin(f0 x), cos(f0 x), ... as float32 sin(phase + x * f), f = float(pi) 2^k."""
+    """METHOD 3.2: [x,] sin(f0 x), cos(f0 x), ... as float32 sin(phase + x * f), f = float(pi) 2^k."""
     x = x.astype(np.float32)
     freqs = (np.float32(np.pi) * (2.0 ** np.arange(num_freqs)).astype(np.float32)).astype(np.float32)
     freqs = np.repeat(freqs, 2)  # f0 f0 f1 f1 ...
@@ -49,7 +49,7 @@ def sincos(x, num_freqs, include_input):
 
 
 def gamma(d):
-    """SPEC 3.4 view directions: [d, sin d, cos d, sin 2d, cos 2d, ..., cos 8d]."""
+    """METHOD 3.4 view directions: [d, sin d, cos d, sin 2d, cos 2d, ..., cos 8d]."""
     parts = [d]
     for f in (1.0, 2.0, 4.0, 8.0):
         parts += [np.sin(d * np.float32(f)), np.cos(d * np.float32(f))]
@@ -73,7 +73,7 @@ def cmd_pe(a):
 
 
 def cmd_dparf(a):
-    """SPEC 3.3 with brute-force nearest fields."""
+    """METHOD 3.3 with brute-force nearest fields."""
     xs, O, Rc, tok = a["xs"], a["origins"], a["rotations"], a["tokens"]
     nk, temp = int(a["nk"][0]), float(a["temperature"][0])
     d_all = np.sqrt(((xs[:, None, :].astype(np.float64) - O[None].astype(np.float64)) ** 2).sum(-1))
@@ -93,7 +93,7 @@ def cmd_dparf(a):
 
 
 def cmd_fdi(a):
-    """The reference's cross-attention, with its Conv1d (N, C, V) layout (SPEC 3.4)."""
+    """The reference's cross-attention, with its Conv1d (N, C, V) layout (METHOD 3.4)."""
     import torch
     import torch.nn.functional as F
 
@@ -116,7 +116,7 @@ def cmd_fdi(a):
 
 
 def cmd_composite(a):
-    """NeRF's raw2outputs as the reference uses it (SPEC 4), float32."""
+    """NeRF's raw2outputs as the reference uses it (METHOD 4), float32."""
     raw, z, d = a["raw"], a["z"], a["d"]
     dists = z[..., 1:] - z[..., :-1]
     dists = np.concatenate([dists, np.full_like(dists[..., :1], 1e10)], -1)
@@ -131,7 +131,7 @@ def cmd_composite(a):
 
 def cmd_encoder(a):
     """torchvision's resnet18 (conv1..layer2, BatchNorm with batch statistics as the reference
-    runs it) and the reference's pixel feature / reduction (SPEC 3.1)."""
+    runs it) and the reference's pixel feature / reduction (METHOD 3.1)."""
     import torch
     import torch.nn.functional as F
     import torchvision
@@ -156,7 +156,7 @@ def cmd_encoder(a):
 
 
 def cmd_vit(a):
-    """ViT-Tiny as SPEC 3.2 states it (timm pre-norm blocks), in torch."""
+    """ViT-Tiny as METHOD 3.2 states it (timm pre-norm blocks), in torch."""
     import torch
     import torch.nn.functional as F
 
@@ -180,7 +180,7 @@ def cmd_vit(a):
 
 
 def reference_pe(x, num_freqs, include_input):
-    """The reference's PositionalEncoding: sin(addcmul(phases, x, freqs)) in float32 (SPEC 3.2)."""
+    """The reference's PositionalEncoding: sin(addcmul(phases, x, freqs)) in float32 (METHOD 3.2)."""
     import torch
 
     freqs = torch.repeat_interleave(math.pi * 2.0 ** torch.arange(0, num_freqs), 2).view(1, -1, 1).float()
@@ -199,8 +199,8 @@ def cmd_pe_fused(a):
 
 
 def cmd_render(a):
-    """End to end (SPEC 2.2, 3, 4): a reference-format checkpoint saved by torch.save renders the
-    given rays of one frame. Every stage is written here from SPEC.md, in PyTorch; nothing comes
+    """End to end (METHOD 2.2, 3, 4): a reference-format checkpoint saved by torch.save renders the
+    given rays of one frame. Every stage is written here from docs/METHOD.md, in PyTorch; nothing comes
     from the C++ code but the frame's inputs and the rays."""
     import torch
     import torch.nn.functional as F
@@ -215,7 +215,7 @@ def cmd_render(a):
     def conv1d(name, x):  # Conv1d k=1 on (..., C) as the reference's (C, N) layout would give
         return F.linear(x, sd[name + ".weight"][:, :, 0], sd[name + ".bias"])
 
-    # SPEC 3.1: ResNet-18 to layer2 with batch statistics, upsampled, colour channels, reduction.
+    # METHOD 3.1: ResNet-18 to layer2 with batch statistics, upsampled, colour channels, reduction.
     net = torchvision.models.resnet18()
     enc = {k[len("encoder.model."):]: v for k, v in sd.items() if k.startswith("encoder.model.")}
     net.load_state_dict(enc, strict=False)
@@ -229,7 +229,7 @@ def cmd_render(a):
         pixel = torch.cat(ups + [color], 1)
         holder = F.conv2d(pixel, sd["encoder.reduction_layer.weight"], sd["encoder.reduction_layer.bias"])
 
-        def project(pts):  # (N, 3) world -> (V, N, 2) pixels, SPEC 2.2
+        def project(pts):  # (N, 3) world -> (V, N, 2) pixels, METHOD 2.2
             xc = torch.einsum("vij,nj->vni", R, pts.double()) + T[:, None, :, 0]
             uvw = torch.einsum("vij,vnj->vni", K, xc)
             return (uvw[..., :2] / uvw[..., 2:]).float()
@@ -261,13 +261,13 @@ def cmd_render(a):
             x = x + F.linear(F.gelu(F.linear(y, p("mlp.fc1.weight"), p("mlp.fc1.bias"))), p("mlp.fc2.weight"), p("mlp.fc2.bias"))
         tokens = F.layer_norm(x, (C,), sd["ViT.norm.weight"], sd["ViT.norm.bias"], eps=1e-6)
 
-        # DPaRF frames (SPEC 3.3): cluster means of the SMPL-frame vertices and of A.
+        # DPaRF frames (METHOD 3.3): cluster means of the SMPL-frame vertices and of A.
         Rh, Th = t["Rh"], t["Th"]
         xs_vertices = (vertices - Th) @ Rh  # Rh^T (x - Th) per row
         origins = torch.stack([xs_vertices[m].mean(0) for m in members])
         rotations = torch.stack([t["A"][m].mean(0) for m in members])
 
-        # Rays (SPEC 4): 64 (or `samples`) points, no jitter; culling at the body distance.
+        # Rays (METHOD 4): 64 (or `samples`) points, no jitter; culling at the body distance.
         S = int(a["samples"][0])
         o, d, near, far = t["origins"], t["directions"], t["near"], t["far"]
         tt = torch.linspace(0, 1, S)
@@ -284,7 +284,7 @@ def cmd_render(a):
         g = reference_pe(local.reshape(-1, 3), 10, True).view(len(xs), 7, -1)
         h = torch.stack([(w[..., None] * torch.cat([tokens[v][knn], g], -1)).sum(1) for v in range(V)], 1)
 
-        # FDI and heads (SPEC 3.4), (N, V, C) layout.
+        # FDI and heads (METHOD 3.4), (N, V, C) layout.
         pv = sample(pixel, project(pts)).permute(1, 0, 2)
         s = torch.relu(conv1d("fc_0", h))
         app = torch.relu(conv1d("alpha_res_0", pv))

@@ -1,4 +1,4 @@
-"""Independent near/far of SPEC 2.2 in numpy (the reference's algorithm, written from the spec).
+"""Independent near/far of METHOD 2.2 in numpy (the reference's algorithm, written from the spec).
 
 Usage: near_far_reference.py rays.txt box.txt out.txt
 rays.txt: N rows "ox oy oz dx dy dz"; box.txt: 2 rows "x y z" (min, max).

@@ -3,7 +3,7 @@
 Usage: ssim_reference.py DIR
 DIR/pairs.txt has one line "h w" per image pair; pair i is stored as raw float64 little-endian
 files DIR/a_<i>.bin and DIR/b_<i>.bin of shape (h, w, 3). Writes DIR/ssim.txt: "ssim psnr" per
-pair, with the protocol's settings (SPEC 6).
+pair, with the protocol's settings (METHOD 6).
 """
 import sys
 

@@ -1,5 +1,5 @@
-"""The reference's preprocessing of one target view (SPEC 2.1), with numpy and OpenCV's Python
-binding, written from SPEC.md: mask union, border band on the distorted mask, undistortion of
+"""The reference's preprocessing of one target view (METHOD 2.1), with numpy and OpenCV's Python
+binding, written from docs/METHOD.md: mask union, border band on the distorted mask, undistortion of
 image and mask with float32 K and D, resize (INTER_AREA / INTER_NEAREST), black background.
 
 Usage:

@@ -214,7 +214,7 @@ TEST_CASE("default.yaml states the defaults and data_splits/synthetic.yaml is it
 }
 
 TEST_CASE(
-    "tiny dataset with noise off: numpy finds SPEC 1.1's structure and vertices fall in "
+    "tiny dataset with noise off: numpy finds METHOD 1.1's structure and vertices fall in "
     "the masks and cameras lie on the ring",
     "[synth][python]") {
   const auto dir = th::test::scratch_dir("synth_geometry");
@@ -254,7 +254,7 @@ TEST_CASE("annots and params read back in C++ equal to numpy's reading", "[synth
     CHECK(th::io::read_npy_value(dir / "data" / human / params) == th::io::read_npy_value(p_numpy));
     CHECK(th::test::byte_difference(read_all(dir / "data" / human / params), read_all(p_numpy)) == "");
   }
-  // The annots hold what SPEC 1.1 says: T in millimetres, K for the written size.
+  // The annots hold what METHOD 1.1 says: T in millimetres, K for the written size.
   const auto a = th::io::read_npy_value(dir / "data" / "CoreView_s03" / "annots.npy");
   const auto T = a["cams"]["T"].at(0).as_tensor();
   CHECK(T.sizes() == torch::IntArrayRef({3, 1}));

@@ -1,4 +1,4 @@
-// The training loss (SPEC 5): rays back in their patches, black elsewhere; MSE + w * LPIPS.
+// The training loss (METHOD 5): rays back in their patches, black elsewhere; MSE + w * LPIPS.
 #include <catch2/catch.hpp>
 #include <torch/torch.h>
 

@@ -1,6 +1,6 @@
 """The reference implementation's orbit (gen_path of Neural Body / NHP render_utils),
 transcribed with numpy, for tests/video: LLFF axis reordering, mean centre, 80th-percentile
-radii x 1.3, viewmatrix, and back to world->camera. The one change SPEC 7 asks for: the camera
+radii x 1.3, viewmatrix, and back to world->camera. The one change METHOD 7 asks for: the camera
 looks at `target` (the person) instead of the reference's offset point.
 
 Usage: orbit_reference.py <dir>   reads R.npy (C,3,3), T.npy (C,3,1) metres, target.npy (3,),

@@ -1,4 +1,4 @@
-// Frame output for free-viewpoint video (SPEC 7): PNG frames, resumable skipping, the mp4 (or a
+// Frame output for free-viewpoint video (METHOD 7): PNG frames, resumable skipping, the mp4 (or a
 // clear message when OpenCV cannot write one) and the contact sheet.
 
 #include <torch/torch.h>

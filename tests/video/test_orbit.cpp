@@ -1,4 +1,4 @@
-// The orbit camera path of SPEC 7: radius from the dataset cameras, every camera looking at the
+// The orbit camera path of METHOD 7: radius from the dataset cameras, every camera looking at the
 // person, the person centred and upright in every frame, and the reference code's result.
 
 #include <torch/torch.h>
@@ -43,7 +43,7 @@ std::pair<torch::Tensor, torch::Tensor> zju_like_rig() {
   return rig(eyes, vec(0.05, -0.1, 0.9));
 }
 
-// Target view's intrinsics at half resolution (512 x 512), as SPEC 2.1 scales them.
+// Target view's intrinsics at half resolution (512 x 512), as METHOD 2.1 scales them.
 torch::Tensor target_K() {
   return torch::tensor({{560.0, 0.0, 258.5}, {0.0, 561.0, 251.0}, {0.0, 0.0, 1.0}},
                        torch::kFloat64);
