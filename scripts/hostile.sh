@@ -474,11 +474,16 @@ if [[ $(sum_of "$work/e_other/index.html") == "$page_sum" && $(cat "$work/site/i
 rows+=("| ... both pages unchanged | - | - | - | | $ok |")
 check_ok "report of an evaluation into its own folder" \
   "$apps/transhuman-report" page --out "$work/e_good" --eval "$work/e_good"
-many=$(($(nproc) * 8 + 1))
+# The online cores, as the executables count them (coreutils' nproc would follow OMP_NUM_THREADS).
+many=$(($(getconf _NPROCESSORS_ONLN) * 8 + 1))
 if ((many <= 1024)); then
   check "train --nproc $many (more than 8 ranks per core)" 2 "--nproc $many is more than 8 ranks per core (this machine has" \
     "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/t_nproc" --nproc "$many"
+  check "eval --nproc $many (more than 8 ranks per core)" 2 "--nproc $many is more than 8 ranks per core (this machine has" \
+    "${evaluate[@]}" $(on "$data") --out "$work/e_nproc" --nproc "$many"
 fi
+check "render --nproc 0" 2 "--nproc: must be in [1, 1024], not 0" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/r_nproc" --nproc 0
 check "train --nproc 100000" 2 "--nproc: must be in [1, 1024], not 100000" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/t_nproc" --nproc 100000
 check "render --dry-run --human <nobody>" 2 "nobody" \
