@@ -59,7 +59,7 @@ StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const 
     // Every rank learns of a failed sample before any back-propagates: the backward pass of
     // synchronised BatchNorm is a collective that every rank must join. A failure anywhere
     // ends the step everywhere (synchronise_step names it).
-    if (comm && comm->sum({stats.bad_loss.empty() ? 0.0 : 1.0}, "agreeing whether a sample of the step failed")[0] > 0) {
+    if (comm && comm->sum({stats.bad_loss.empty() ? 0.0 : 1.0}, "the step's sample check")[0] > 0) {
       if (stats.bad_loss.empty()) stats.peer_failed = true;
       break;
     }
