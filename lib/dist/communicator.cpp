@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <exception>
+#include <future>
 #include <mutex>
 #include <thread>
 
@@ -123,12 +124,32 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
   so.waitWorkers = true;
   so.timeout = timeout;
   compat::use_classic_tcpstore(so, 0);
+  const std::string where = "rank " + std::to_string(rank_) + " of " + std::to_string(world_size_) +
+                            ": rendezvous at " + env.master_addr + ":" + std::to_string(env.master_port);
+  // The store's own timeout does not bound every wait (a port held by another program that
+  // accepts the connection and never answers keeps the client waiting), so the rendezvous runs
+  // on a thread of its own, given up after the timeout (the process then exits with the error).
+  using Store = c10::intrusive_ptr<c10d::TCPStore>;
+  auto joined = std::make_shared<std::promise<Store>>();
+  auto store = joined->get_future();
+  std::thread([joined, addr = env.master_addr, so] {
+    try {
+      joined->set_value(c10::make_intrusive<c10d::TCPStore>(addr, so));
+    } catch (...) {
+      joined->set_exception(std::current_exception());
+    }
+  }).detach();
+  if (store.wait_for(std::chrono::duration<double>(timeout_s + 2)) != std::future_status::ready) {
+    failed_ = true;
+    fail(where, " got no answer within ", timeout_s, " s",
+         rank_ == 0 ? " (did every rank start?)"
+                    : " (is MASTER_PORT rank 0's? another program there accepts connections but does not answer)");
+  }
   try {
-    store_ = c10::make_intrusive<c10d::TCPStore>(env.master_addr, so);
+    store_ = store.get();
   } catch (const std::exception& e) {
     failed_ = true;
-    fail("rank ", rank_, " of ", world_size_, ": rendezvous at ", env.master_addr, ":", env.master_port,
-         " failed within ", timeout_s, " s: ", message_of(e),
+    fail(where, " failed within ", timeout_s, " s: ", message_of(e),
          rank_ == 0 ? " (is the port free? did every rank start?)"
                     : " (is rank 0 running, and are MASTER_ADDR/MASTER_PORT its address?)");
   }
