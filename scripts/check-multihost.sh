@@ -94,6 +94,19 @@ rank() {
   last_pid=$!
 }
 
+# pair NAME OUT ARGS...: a run of 2 ranks on port $p, rank 0 in the first namespace (writing OUT
+# when not empty), rank 1 in the second, logs $work/NAME0.log and NAME1.log; sets r0 and r1.
+pair() {
+  local name=$1 out=$2
+  shift 2
+  local outs=()
+  [[ -n $out ]] && outs=(--out "$out")
+  rank "$ns_a" 0 $addr_a "$p" "$work/${name}0.log" "$@" "${outs[@]}"
+  r0=$last_pid
+  rank "$ns_b" 1 $addr_a "$p" "$work/${name}1.log" "$@"
+  r1=$last_pid
+}
+
 # reap VAR PID: waits for background PID (in this shell: a subshell cannot) and sets VAR to its
 # exit status.
 reap() {
@@ -125,10 +138,7 @@ r1=$last_pid
 reap s0 $r0; reap s1 $r1
 [[ $s0 == 0 && $s1 == 0 ]] || { cat "$work"/lo*.log; die "training over loopback failed"; }
 p=$(port)
-rank "$ns_a" 0 $addr_a "$p" "$work/mh0.log" "${train_args[@]}" --out "$work/mh" --max-steps $steps --rank-state "$work/mh_state"
-r0=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/mh1.log" "${train_args[@]}" --max-steps $steps --rank-state "$work/mh_state"
-r1=$last_pid
+pair mh "$work/mh" "${train_args[@]}" --max-steps $steps --rank-state "$work/mh_state"
 reap s0 $r0; reap s1 $r1
 [[ $s0 == 0 && $s1 == 0 ]] || { cat "$work"/mh*.log; die "training across the link failed"; }
 grep -q "joined (gloo via $addr_a" "$work/mh0.log" || die "rank 0 did not join through $addr_a"
@@ -151,10 +161,7 @@ t0=$(date +%s.%N)
 "${eval_args[@]}" --out "$work/e1" >"$work/e1.log" 2>&1 || { cat "$work/e1.log"; die "evaluation (1 process) failed"; }
 t1=$(date +%s.%N)
 p=$(port)
-rank "$ns_a" 0 $addr_a "$p" "$work/e2r0.log" "${eval_args[@]}" --out "$work/e2"
-r0=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/e2r1.log" "${eval_args[@]}"
-r1=$last_pid
+pair e2r "$work/e2" "${eval_args[@]}"
 reap s0 $r0; reap s1 $r1
 [[ $s0 == 0 && $s1 == 0 ]] || { cat "$work"/e2*.log; die "sharded evaluation across the link failed"; }
 t2=$(date +%s.%N)
@@ -208,10 +215,8 @@ resume_run() {
 # Delay and loss.
 if ip netns exec "$ns_a" tc qdisc add dev "$if_a" root netem delay 50ms loss 1% 2>/dev/null; then
   p=$(port)
-  rank "$ns_a" 0 $addr_a "$p" "$work/net0.log" "${train_args[@]}" --out "$work/net" --max-steps $steps --rank-state "$work/net_state"
-  a=$last_pid
-  rank "$ns_b" 1 $addr_a "$p" "$work/net1.log" "${train_args[@]}" --max-steps $steps --rank-state "$work/net_state"
-  b=$last_pid
+  pair net "$work/net" "${train_args[@]}" --max-steps $steps --rank-state "$work/net_state"
+  a=$r0 b=$r1
   reap sa $a; reap sb $b
   ip netns exec "$ns_a" tc qdisc del dev "$if_a" root
   same="weights differ"
@@ -226,10 +231,8 @@ fi
 for timeout in 60 10; do
   dir=$work/down$timeout
   p=$(port)
-  rank "$ns_a" 0 $addr_a "$p" "$work/down${timeout}_0.log" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=$timeout --out "$dir"
-  a=$last_pid
-  rank "$ns_b" 1 $addr_a "$p" "$work/down${timeout}_1.log" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=$timeout
-  b=$last_pid
+  pair down${timeout}_ "$dir" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=$timeout
+  a=$r0 b=$r1
   wait_step "$dir" 10 || bad "link down ($timeout s): the run did not reach step 10"
   ip -n "$ns_a" link set "$if_a" down
   t_fault=$(date +%s)
@@ -253,10 +256,8 @@ done
 # One rank SIGKILLed.
 dir=$work/kill
 p=$(port)
-rank "$ns_a" 0 $addr_a "$p" "$work/kill0.log" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=10 --out "$dir"
-a=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/kill1.log" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=10
-b=$last_pid
+pair kill "$dir" "${train_args[@]}" "${long[@]}" train.dist_timeout_s=10
+a=$r0 b=$r1
 wait_step "$dir" 10 || bad "kill: the run did not reach step 10"
 kill -9 "$b"
 t_fault=$(date +%s)
@@ -290,30 +291,24 @@ s = socket.socket(); s.bind(('0.0.0.0', $p)); s.listen(1); time.sleep(60)" &
 pids+=($!)
 listener=$!
 sleep 0.5
-rank "$ns_a" 0 $addr_a "$p" "$work/port0.log" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10 --out "$work/port"
-a=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/port1.log" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10
-b=$last_pid
+pair port "$work/port" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10
+a=$r0 b=$r1
 t0=$(date +%s)
 reap sa $a; reap sb $b
 secs=$(($(date +%s) - t0))
 kill "$listener" 2>/dev/null
-msg=$(grep -h ': error:' "$work/port0.log" | head -1 | cut -c1-160)
+msg=$(grep -h ': error:' "$work/port0.log" "$work/port1.log" | cut -c1-160 | paste -sd " " -)
 row "MASTER_PORT in use: ${msg//|/\\|}" "$sa, $sb" "$secs (from the start)" "none" "-"
 [[ $sa == 2 && $sb == 2 ]] || bad "port in use: exit $sa $sb (expected 2 2)"
 
 # Two runs given the same MASTER_PORT: the first runs on; the second's ranks are refused.
 p=$(port)
 dir=$work/first
-rank "$ns_a" 0 $addr_a "$p" "$work/first0.log" "${train_args[@]}" --max-steps 30 "${long[@]}" train.dist_timeout_s=30 --out "$dir" --rank-state "$work/first_state"
-a=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/first1.log" "${train_args[@]}" --max-steps 30 "${long[@]}" train.dist_timeout_s=30 --rank-state "$work/first_state"
-b=$last_pid
+pair first "$dir" "${train_args[@]}" --max-steps 30 "${long[@]}" train.dist_timeout_s=30 --rank-state "$work/first_state"
+a=$r0 b=$r1
 wait_step "$dir" 5 || bad "same port: the first run did not reach step 5"
-rank "$ns_a" 0 $addr_a "$p" "$work/second0.log" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10 --out "$work/second"
-c=$last_pid
-rank "$ns_b" 1 $addr_a "$p" "$work/second1.log" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10
-d=$last_pid
+pair second "$work/second" "${train_args[@]}" --max-steps 2 train.dist_timeout_s=10
+c=$r0 d=$r1
 t0=$(date +%s)
 reap sc $c; reap sd $d
 secs=$(($(date +%s) - t0))
