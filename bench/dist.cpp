@@ -90,7 +90,7 @@ int allreduce_worker(int reps, const std::string& result) {
   if (!env) th::fail("--allreduce-worker runs under the launcher");
   torch::set_num_threads(1);
   th::Config config;
-  th::model::TransHuman model(config.model, config.render.cull_distance);
+  th::model::TransHuman model(config.model);
   int64_t numel = 0;
   for (auto& p : model->parameters()) {
     p.mutable_grad() = torch::randn_like(p);

@@ -25,6 +25,7 @@
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
 #include "model/transhuman.hpp"
+#include "pipeline/pipeline.hpp"
 #include "render/progressive.hpp"
 
 using namespace th;
@@ -246,7 +247,7 @@ int main(int argc, char** argv) {
   rc.train_chunk_points = train_chunk;
   rc.chunk_points = render_chunk;
   torch::manual_seed(1);
-  model::TransHuman net(mc, rc.cull_distance);
+  model::TransHuman net(mc);
   {
     const auto counts = model::parameter_counts(*net);
     std::string s = "Parameters: ";
@@ -258,7 +259,7 @@ int main(int argc, char** argv) {
   {
     torch::NoGradGuard ng;
     net->eval();
-    const auto cache = net->prepare(scene.in);
+    const auto cache = net->prepare(scene.in, rc.cull_distance);
     torch::Tensor d;
     const auto pts = body_points(scene, *cache.geometry.body, 20000, &d);
     const auto raw = net->forward(cache, pts, d);
@@ -278,7 +279,7 @@ int main(int argc, char** argv) {
     model::FrameCache cache_ng;
     {
       torch::NoGradGuard ng;
-      cache_ng = net->prepare(scene.in);
+      cache_ng = net->prepare(scene.in, rc.cull_distance);
     }
     const int64_t total = quick ? 16384 : 65536;
     const auto pts = body_points(scene, *cache_ng.geometry.body, total, &dirs);
@@ -290,7 +291,7 @@ int main(int argc, char** argv) {
     // Prepared with autograd on, as training prepares (level tables, not inference's readout windows).
     model::FrameCache cache_g = [&] {
       torch::AutoGradMode grad(true);
-      return net->prepare(scene.in);
+      return net->prepare(scene.in, rc.cull_distance);
     }();
     cache_g.visit([](torch::Tensor& t, torch::Tensor* sink) {
       if (!t.defined() || !t.is_floating_point()) return;
@@ -298,9 +299,13 @@ int main(int argc, char** argv) {
       if (sink) *sink = torch::zeros_like(t);
     });
     cache_g.geometry = cache_ng.geometry;
-    cache_g.human.frames = cache_ng.human.frames;
-    cache_g.pixels.alpha.image_table = cache_ng.pixels.alpha.image_table;
-    cache_g.pixels.color.image_table = cache_ng.pixels.color.image_table;
+    {
+      auto& human = std::get<model::TokenTableStage>(cache_g.human);
+      human.frames = {human.frames.origins.detach(), human.frames.rotations.detach()};
+      auto& px = std::get<model::PixelReadouts>(cache_g.pixels);
+      px.alpha.image_table = px.alpha.image_table.detach();
+      px.color.image_table = px.color.image_table.detach();
+    }
     // Rounds over all chunk sizes; each cell keeps its best round (the machine is shared).
     struct Cell { double fwd = 0, dfirst = 0, fb = 0, train = 0, mem = 0; render::Profile profile; double fwd_s = 0; };
     std::map<std::pair<int64_t, size_t>, Cell> best;
@@ -396,11 +401,11 @@ int main(int argc, char** argv) {
       for (const auto& p : net->parameters()) snapshot.push_back(p.detach().clone());
       torch::optim::Adam adam(net->parameters(), torch::optim::AdamOptions(7e-4));
       int64_t evaluated = 0;
-      auto step = [&](render::Profile* prof, bool skip_far) {
+      auto step = [&](render::Profile* prof, bool skip_far_points) {
         net->set_profile(prof);
         render::ScopedTimer t(prof, "loss, optimiser");
-        const auto cache = net->prepare(scene.in);
-        const auto img = model::render_training_rays(*net, cache, rays, rcs, skip_far, prof);
+        const auto cache = net->prepare(scene.in, rc.cull_distance);
+        const auto img = pipeline::render(*net, cache, rays, rcs, {true, skip_far_points}, prof);
         evaluated = img.stats.density_points;
         const auto loss = (img.rgb - 0.5).pow(2).mean();
         adam.zero_grad();
@@ -453,8 +458,8 @@ int main(int argc, char** argv) {
       {
         torch::NoGradGuard ng;
         net->set_profile(&prof);
-        const auto cache = net->prepare(scene.in);
-        img = model::render_rays(*net, cache, rays, rcs, &prof);
+        const auto cache = net->prepare(scene.in, rc.cull_distance);
+        img = pipeline::render(*net, cache, rays, rcs, pipeline::kInference, &prof);
         net->set_profile(nullptr);
       }
       const double sec = seconds_since(t0);

@@ -104,8 +104,8 @@ void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_s
   const Config base = setup.load({"data.ratio=1"});
   const auto smpl = data::load_body_model(base.data);
   const data::Dataset dataset(base.data, base.eval.setting, data::Dataset::Mode::Test, smpl);
-  model::TransHuman net(base.model, base.render.cull_distance);
-  pipeline::load_weights(*net, setup.checkpoint, base.eval.model_mismatch == "warn");
+  model::TransHuman net(base.model);
+  pipeline::load_weights(*net, setup.checkpoint, base.eval.model_mismatch == MismatchPolicy::warn);
   net->eval();
   net->set_products(model::resolve_products(base.precision, base.fp32_products, torch::kCPU));
   pipeline::Tokens tokens(base.model.grouping, smpl->v_template);
@@ -119,7 +119,7 @@ void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_s
   auto t0 = Clock::now();
   const auto cache = [&] {
     bench::PeakMemory mem;
-    auto c = net->prepare(inputs);
+    auto c = pipeline::prepare_frame(*net, inputs, base.render);
     prepare_mib = mem.tensor_mib();
     return c;
   }();
@@ -140,7 +140,7 @@ void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_s
     net->set_profile(&profile);
     bench::PeakMemory mem;
     t0 = Clock::now();
-    const auto img = model::render_rays(*net, cache, rays, rc, &profile);
+    const auto img = pipeline::render(*net, cache, rays, rc, pipeline::kInference, &profile);
     const double sec = seconds_since(t0);
     net->set_profile(nullptr);
     const fs::path reference_file = setup.scratch / ("view_" + setup.reference + "_" + std::to_string(samples) + ".pt");
@@ -196,7 +196,7 @@ double step_seconds(const fs::path& metrics) {
 }
 
 std::vector<torch::Tensor> weights_of(const Config& c, const fs::path& checkpoint) {
-  model::TransHuman net(c.model, c.render.cull_distance);
+  model::TransHuman net(c.model);
   pipeline::load_weights(*net, checkpoint);
   std::vector<torch::Tensor> out;
   for (const auto& p : net->parameters()) out.push_back(p.detach().clone());

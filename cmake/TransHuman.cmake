@@ -6,6 +6,16 @@ set(TH_WARNINGS -Wall -Wextra -Wno-unused-parameter)
 # One precompiled <torch/torch.h> for the whole project: th_pch owns it, every other target
 # reuses it (the flags below are identical everywhere, which REUSE_FROM requires).
 add_library(th_pch STATIC ${PROJECT_SOURCE_DIR}/lib/core/pch.cpp)
+# LibTorch archives and PyTorch wheels ship fmt headers of their own in their include folder; the
+# spdlog we link was built against the system's fmt, whose headers must therefore come first.
+# (A system fmt in /usr/include cannot be put first: the compiler searches it last. Such a setup
+# needs an spdlog built with LibTorch's fmt, or a LibTorch without its own fmt, docs/BUILDING.md.)
+if(TARGET fmt::fmt)
+  get_target_property(TH_FMT_INCLUDE fmt::fmt INTERFACE_INCLUDE_DIRECTORIES)
+  if(TH_FMT_INCLUDE)
+    target_include_directories(th_pch SYSTEM BEFORE PUBLIC ${TH_FMT_INCLUDE})
+  endif()
+endif()
 target_include_directories(th_pch SYSTEM PUBLIC ${TORCH_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
 target_link_libraries(th_pch PUBLIC ${TORCH_LIBRARIES})
 # ATen's at::parallel_for is a header template: in our own kernels it runs threads only when our

@@ -33,7 +33,7 @@ std::string checkpoint_from_records(std::string_view bytes) {
     if (end == std::string_view::npos) break;
     bytes.remove_prefix(end + kSeparator.size());
   }
-  return th::io::detail::write_zip(members);
+  return th::io::write_zip(members);
 }
 
 }  // namespace
@@ -42,7 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string bytes(reinterpret_cast<const char*>(data), size);
   const bool is_zip = bytes.rfind("PK", 0) == 0;
   try {
-    th::io::detail::read_zip(bytes, "fuzz.zip");
+    th::io::read_zip(bytes, "fuzz.zip");
   } catch (const th::Error&) {
   }
   const std::string file = is_zip ? bytes : checkpoint_from_records(bytes);

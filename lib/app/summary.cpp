@@ -19,7 +19,7 @@ void load_first_training_sample(const Config& c) {
 
 void print_summary(const RunContext& ctx, bool dry_run, const std::string& checkpoint) {
   const Config& c = ctx.config;
-  spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", c.data.dataset,
+  spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", config::name_of(c.data.dataset),
                c.data.root, c.data.split_file, c.data.train_setting, c.data.test_setting,
                c.data.ratio);
   // The data index: splits and annots only (no images are read), unless this is a dry run.
@@ -44,12 +44,12 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
   const auto& m = c.model;
   spdlog::info("model: {} | grouping {} (Nt {}) | TransHE {} ({} PE) | DPaRF Nk {} ({}) | FDI a={} "
                "h={} rgb={}",
-               m.representation, m.grouping.kind, m.grouping.num_tokens,
-               m.transhe.enabled ? "on" : "off", m.transhe.position, m.dparf.nk,
-               m.dparf.coordinate, m.fdi.appearance, m.fdi.human, m.fdi.raw_rgb);
-  model::TransHuman net(m, c.render.cull_distance);
+               config::name_of(m.representation), config::name_of(m.grouping.kind), m.grouping.num_tokens,
+               m.transhe.enabled ? "on" : "off", config::name_of(m.transhe.position), m.dparf.nk,
+               config::name_of(m.dparf.coordinate), m.fdi.appearance, m.fdi.human, m.fdi.raw_rgb);
+  model::TransHuman net(m);
   if (dry_run && !checkpoint.empty()) {
-    pipeline::load_weights(*net, checkpoint, c.eval.model_mismatch == "warn");
+    pipeline::load_weights(*net, checkpoint, c.eval.model_mismatch == MismatchPolicy::warn);
     spdlog::info("checkpoint {} read and checked", checkpoint);
   }
   for (const auto& p : model::parameter_counts(*net))

@@ -184,10 +184,12 @@ torch::Tensor cluster_sizes(const torch::Tensor& labels) {
 }
 
 std::unique_ptr<Grouping> make_grouping(const GroupingConfig& c) {
-  if (c.kind == "canonical_kmeans") return std::make_unique<CanonicalKMeans>(c);
-  if (c.kind == "canonical_grid") return std::make_unique<CanonicalGrid>(c.num_tokens);
-  if (c.kind == "observation_grid") return std::make_unique<ObservationGrid>(c.num_tokens);
-  fail("unknown grouping kind '", c.kind, "'");
+  switch (c.kind) {
+    case GroupingKind::canonical_kmeans: return std::make_unique<CanonicalKMeans>(c);
+    case GroupingKind::canonical_grid: return std::make_unique<CanonicalGrid>(c.num_tokens);
+    case GroupingKind::observation_grid: return std::make_unique<ObservationGrid>(c.num_tokens);
+  }
+  fail("unknown grouping kind ", int(c.kind));
 }
 
 }  // namespace th::body

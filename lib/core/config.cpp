@@ -31,7 +31,7 @@ void validate_section(const DataConfig& c, const std::string& path) {
           c.patch.body_prob, "must be a probability");
   require(c.workers >= 0 && c.workers <= 256, path, "workers", c.workers, "must be in [0, 256]");
   require(c.prefetch >= 1 && c.prefetch <= 1024, path, "prefetch", c.prefetch, "must be in [1, 1024]");
-  require(c.visibility != "files" || !c.visibility_root.empty(), path, "visibility_root",
+  require(c.visibility != VisibilitySource::files || !c.visibility_root.empty(), path, "visibility_root",
           "''", "must name a folder when data.visibility is 'files'");
   require_range(c.jitter.brightness, path, "jitter.brightness");
   require_range(c.jitter.contrast, path, "jitter.contrast");
@@ -60,12 +60,12 @@ void validate_section(const ModelConfig& c, const std::string& path) {
           "6 x pe_freqs (sin and cos of x, y, z per frequency) must equal transhe.dim");
   require(c.fdi.appearance || c.fdi.human, path, "fdi", "{appearance: false, human: false}",
           "at least one of the two branches must stay on");
-  require(!g.kmeans_file.empty() ? g.kind == "canonical_kmeans" : true, path, "grouping.kmeans_file",
+  require(!g.kmeans_file.empty() ? g.kind == GroupingKind::canonical_kmeans : true, path, "grouping.kmeans_file",
           g.kmeans_file, "a k-means label file only applies to grouping.kind canonical_kmeans");
-  require(!(g.kind == "observation_grid" && c.transhe.position == "canonical"), path,
-          "transhe.position", c.transhe.position,
+  require(!(g.kind == GroupingKind::observation_grid && c.transhe.position == TokenPosition::canonical), path,
+          "transhe.position", config::name_of(c.transhe.position),
           "observation-space grouping has no canonical token position; use 'observation'");
-  if (c.representation == "spc_trilinear") {
+  if (c.representation == Representation::spc_trilinear) {
     require(c.fdi.human, path, "fdi.human", "false",
             "the SPC + trilinear baseline is a human representation; it needs fdi.human");
     require(c.spc.voxel_size > 0, path, "spc.voxel_size", c.spc.voxel_size, "must be positive");

@@ -10,6 +10,47 @@
 
 namespace th {
 
+// ---- choices, parsed once into enums (their YAML names listed once, config_io.hpp) ---------
+enum class DatasetKind { zju_mocap, h36m, synthetic };
+enum class VisibilitySource { rasterize, files };
+enum class MissingVisibility { error, all_visible };
+enum class CalibrationCheck { error, warn };
+enum class BorderBand { distorted, undistorted };
+enum class BatchNormStats { batch, running };
+enum class GroupingKind { canonical_kmeans, canonical_grid, observation_grid };
+enum class MeanOver { all, visible };
+enum class TokenPosition { canonical, observation };
+enum class PeRounding { fused, separate };
+enum class Coordinate { relative, absolute, none };
+enum class Representation { transhuman, spc_trilinear };
+enum class Recompute { automatic, always, never };
+enum class MismatchPolicy { error, warn };
+
+#define TH_CHOICE_NAMES(E, ...)                                   \
+  inline const config::ChoiceNames<E>& choice_names(E) {          \
+    static const config::ChoiceNames<E> names{__VA_ARGS__};       \
+    return names;                                                 \
+  }
+TH_CHOICE_NAMES(DatasetKind, {"zju_mocap", DatasetKind::zju_mocap}, {"h36m", DatasetKind::h36m},
+                {"synthetic", DatasetKind::synthetic})
+TH_CHOICE_NAMES(VisibilitySource, {"rasterize", VisibilitySource::rasterize}, {"files", VisibilitySource::files})
+TH_CHOICE_NAMES(MissingVisibility, {"error", MissingVisibility::error}, {"all_visible", MissingVisibility::all_visible})
+TH_CHOICE_NAMES(CalibrationCheck, {"error", CalibrationCheck::error}, {"warn", CalibrationCheck::warn})
+TH_CHOICE_NAMES(BorderBand, {"distorted", BorderBand::distorted}, {"undistorted", BorderBand::undistorted})
+TH_CHOICE_NAMES(BatchNormStats, {"batch", BatchNormStats::batch}, {"running", BatchNormStats::running})
+TH_CHOICE_NAMES(GroupingKind, {"canonical_kmeans", GroupingKind::canonical_kmeans},
+                {"canonical_grid", GroupingKind::canonical_grid}, {"observation_grid", GroupingKind::observation_grid})
+TH_CHOICE_NAMES(MeanOver, {"all", MeanOver::all}, {"visible", MeanOver::visible})
+TH_CHOICE_NAMES(TokenPosition, {"canonical", TokenPosition::canonical}, {"observation", TokenPosition::observation})
+TH_CHOICE_NAMES(PeRounding, {"fused", PeRounding::fused}, {"separate", PeRounding::separate})
+TH_CHOICE_NAMES(Coordinate, {"relative", Coordinate::relative}, {"absolute", Coordinate::absolute},
+                {"none", Coordinate::none})
+TH_CHOICE_NAMES(Representation, {"transhuman", Representation::transhuman},
+                {"spc_trilinear", Representation::spc_trilinear})
+TH_CHOICE_NAMES(MismatchPolicy, {"error", MismatchPolicy::error}, {"warn", MismatchPolicy::warn})
+TH_CHOICE_NAMES(Recompute, {"auto", Recompute::automatic}, {"always", Recompute::always}, {"never", Recompute::never})
+#undef TH_CHOICE_NAMES
+
 // ---- data (METHOD 1, 2.1, 5) --------------------------------------------------------------
 struct PatchConfig {
   int count = 6;            // patches per target image
@@ -26,23 +67,23 @@ struct JitterConfig {
 };
 
 struct DataConfig {
-  std::string dataset = "synthetic";            // zju_mocap | h36m | synthetic
+  DatasetKind dataset = DatasetKind::synthetic;  // zju_mocap | h36m | synthetic
   std::string root = "data/synthetic";           // folder holding one folder per human
   std::string split_file = "data_splits/synthetic.yaml";
   std::string train_setting = "training";
   std::string test_setting = "identity";         // pose | identity | one_shot | cross_dataset | fitting
   std::string smpl_model = "";                   // SMPL .pkl/.npz; empty: <root>/smpl_model.npz
   double ratio = 0.5;                            // image resize factor
-  std::string visibility = "rasterize";          // rasterize | files
+  VisibilitySource visibility = VisibilitySource::rasterize;  // rasterize | files
   std::string visibility_root = "";              // for visibility: files (NHP's zju_rasterization)
-  std::string visibility_missing = "error";      // files: a missing file is an error | all_visible (warns)
+  MissingVisibility visibility_missing = MissingVisibility::error;  // files: error | all_visible (warns)
   double box_padding = 0.05;                     // world AABB padding on z (metres)
   // Calibration that cannot be right (intrinsics, rotations, the body out of a reference view or
   // at an implausible distance; data/calibration.hpp): an error, or a warning.
-  std::string calibration_check = "error";       // error | warn
+  CalibrationCheck calibration_check = CalibrationCheck::error;  // error | warn
   // Target mask border band (METHOD 2.1 step 6): marked on the distorted mask before undistortion
   // [parity], or on the undistorted one.
-  std::string border_band = "distorted";         // distorted | undistorted
+  BorderBand border_band = BorderBand::distorted;  // distorted | undistorted
   PatchConfig patch;
   JitterConfig jitter;
   int workers = 2;                               // background loader threads
@@ -52,22 +93,22 @@ struct DataConfig {
 // ---- model (METHOD 2.5, 3) -----------------------------------------------------------------
 struct EncoderConfig {
   std::string pretrained = "";        // ResNet-18 weights file from scripts/export_pretrained.py
-  std::string batchnorm = "batch";    // batch [parity] | running
+  BatchNormStats batchnorm = BatchNormStats::batch;  // batch [parity] | running
   bool fast_sampling = true;          // METHOD 3.1/9: sample low-res maps, no (V,384,H,W) tensor
 };
 
 struct GroupingConfig {
-  std::string kind = "canonical_kmeans";  // canonical_kmeans | canonical_grid | observation_grid
+  GroupingKind kind = GroupingKind::canonical_kmeans;
   int num_tokens = 300;                   // Nt
   std::string kmeans_file = "";           // reference kmeans_dict_300.npy (optional)
   std::string cache_dir = "cache";        // k-means labels cached here, keyed by model and Nt
   int64_t seed = 0;
-  std::string mean_over = "all";          // all [parity] | visible
+  MeanOver mean_over = MeanOver::all;     // all [parity] | visible
 };
 
 struct TransHEConfig {
   bool enabled = true;             // false: tokens go straight to DPaRF (w/o transformer)
-  std::string position = "canonical";  // canonical | observation (PE of posed token centres)
+  TokenPosition position = TokenPosition::canonical;  // observation: PE of posed token centres
   int dim = 192;
   int depth = 12;
   int heads = 3;
@@ -76,15 +117,15 @@ struct TransHEConfig {
   double pe_scale = 1.5;           // Pc = mean(v_template[c]) / pe_scale
   // float32 sin(x * f + phase): "fused" rounds once, as the reference's torch.addcmul (FMA)
   // [parity, METHOD 3.2]; "separate" rounds the product and the sum (numpy's evaluation).
-  std::string pe_rounding = "fused";
+  PeRounding pe_rounding = PeRounding::fused;
 };
 
 struct DPaRFConfig {
   int nk = 7;                          // nearest fields
-  std::string coordinate = "relative";  // relative | absolute | none
+  Coordinate coordinate = Coordinate::relative;
   double softmax_temperature = 0.5;    // w = softmax(-d / T)
   int pe_freqs = 10;
-  std::string pe_rounding = "fused";   // fused [parity] | separate, as model.transhe.pe_rounding
+  PeRounding pe_rounding = PeRounding::fused;  // fused [parity] | separate, as transhe.pe_rounding
 };
 
 struct FDIConfig {
@@ -99,7 +140,7 @@ struct SPCConfig {
 };
 
 struct ModelConfig {
-  std::string representation = "transhuman";  // transhuman | spc_trilinear
+  Representation representation = Representation::transhuman;
   EncoderConfig encoder;
   GroupingConfig grouping;
   TransHEConfig transhe;
@@ -131,7 +172,7 @@ struct RenderConfig {
   // forward pass (one forward less; memory grows with the points); "auto" keeps them up to
   // model::kKeepGraphPoints points per field call (the demo's batch) and recomputes beyond.
   // The same arithmetic in the same order either way: the same weights, bit for bit.
-  std::string train_recompute = "auto";
+  Recompute train_recompute = Recompute::automatic;
 };
 
 // ---- training (METHOD 5) -------------------------------------------------------------------
@@ -176,7 +217,7 @@ struct EvalConfig {
   bool reuse_frames = true;
   // A checkpoint trained with other model.* values (its stored config, or its run's config.yaml):
   // "error" names the keys and stops; "warn" names them and goes on (a deliberate ablation).
-  std::string model_mismatch = "error";
+  MismatchPolicy model_mismatch = MismatchPolicy::error;
 };
 
 struct Config {
@@ -211,19 +252,19 @@ template <class V> void visit_fields(V& v, JitterConfig& c) {
   v("hue", c.hue);
 }
 template <class V> void visit_fields(V& v, DataConfig& c) {
-  v.choice("dataset", c.dataset, {"zju_mocap", "h36m", "synthetic"});
+  v.choice("dataset", c.dataset);
   v("root", c.root);
   v("split_file", c.split_file);
   v("train_setting", c.train_setting);
   v("test_setting", c.test_setting);
   v("smpl_model", c.smpl_model);
   v("ratio", c.ratio);
-  v.choice("visibility", c.visibility, {"rasterize", "files"});
+  v.choice("visibility", c.visibility);
   v("visibility_root", c.visibility_root);
-  v.choice("visibility_missing", c.visibility_missing, {"error", "all_visible"});
+  v.choice("visibility_missing", c.visibility_missing);
   v("box_padding", c.box_padding);
-  v.choice("calibration_check", c.calibration_check, {"error", "warn"});
-  v.choice("border_band", c.border_band, {"distorted", "undistorted"});
+  v.choice("calibration_check", c.calibration_check);
+  v.choice("border_band", c.border_band);
   v("patch", c.patch);
   v("jitter", c.jitter);
   v("workers", c.workers);
@@ -231,34 +272,34 @@ template <class V> void visit_fields(V& v, DataConfig& c) {
 }
 template <class V> void visit_fields(V& v, EncoderConfig& c) {
   v("pretrained", c.pretrained);
-  v.choice("batchnorm", c.batchnorm, {"batch", "running"});
+  v.choice("batchnorm", c.batchnorm);
   v("fast_sampling", c.fast_sampling);
 }
 template <class V> void visit_fields(V& v, GroupingConfig& c) {
-  v.choice("kind", c.kind, {"canonical_kmeans", "canonical_grid", "observation_grid"});
+  v.choice("kind", c.kind);
   v("num_tokens", c.num_tokens);
   v("kmeans_file", c.kmeans_file);
   v("cache_dir", c.cache_dir);
   v("seed", c.seed);
-  v.choice("mean_over", c.mean_over, {"all", "visible"});
+  v.choice("mean_over", c.mean_over);
 }
 template <class V> void visit_fields(V& v, TransHEConfig& c) {
   v("enabled", c.enabled);
-  v.choice("position", c.position, {"canonical", "observation"});
+  v.choice("position", c.position);
   v("dim", c.dim);
   v("depth", c.depth);
   v("heads", c.heads);
   v("mlp_dim", c.mlp_dim);
   v("pe_freqs", c.pe_freqs);
   v("pe_scale", c.pe_scale);
-  v.choice("pe_rounding", c.pe_rounding, {"fused", "separate"});
+  v.choice("pe_rounding", c.pe_rounding);
 }
 template <class V> void visit_fields(V& v, DPaRFConfig& c) {
   v("nk", c.nk);
-  v.choice("coordinate", c.coordinate, {"relative", "absolute", "none"});
+  v.choice("coordinate", c.coordinate);
   v("softmax_temperature", c.softmax_temperature);
   v("pe_freqs", c.pe_freqs);
-  v.choice("pe_rounding", c.pe_rounding, {"fused", "separate"});
+  v.choice("pe_rounding", c.pe_rounding);
 }
 template <class V> void visit_fields(V& v, FDIConfig& c) {
   v("appearance", c.appearance);
@@ -270,7 +311,7 @@ template <class V> void visit_fields(V& v, SPCConfig& c) {
   v("channels", c.channels);
 }
 template <class V> void visit_fields(V& v, ModelConfig& c) {
-  v.choice("representation", c.representation, {"transhuman", "spc_trilinear"});
+  v.choice("representation", c.representation);
   v("encoder", c.encoder);
   v("grouping", c.grouping);
   v("transhe", c.transhe);
@@ -287,7 +328,7 @@ template <class V> void visit_fields(V& v, RenderConfig& c) {
   v("chunk_points", c.chunk_points);
   v("termination_transmittance", c.termination_transmittance);
   v("train_chunk_points", c.train_chunk_points);
-  v.choice("train_recompute", c.train_recompute, {"auto", "always", "never"});
+  v.choice("train_recompute", c.train_recompute);
 }
 template <class V> void visit_fields(V& v, TrainConfig& c) {
   v("epochs", c.epochs);
@@ -318,7 +359,7 @@ template <class V> void visit_fields(V& v, EvalConfig& c) {
   v("limit", c.limit);
   v("save_images", c.save_images);
   v("reuse_frames", c.reuse_frames);
-  v.choice("model_mismatch", c.model_mismatch, {"error", "warn"});
+  v.choice("model_mismatch", c.model_mismatch);
 }
 template <class V> void visit_fields(V& v, Config& c) {
   v("seed", c.seed);

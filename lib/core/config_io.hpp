@@ -14,6 +14,7 @@
 //   template <class V> void visit_fields(V& v, DataConfig& c) {
 //     v("patch", c.patch);                                   // nested section
 //     v.choice("dataset", c.dataset, {"zju_mocap", "h36m", "synthetic"});
+//     v.choice("coordinate", c.coordinate);  // an enum with choice_names (below)
 //   }
 //
 // Field types: bool, int, int64_t, double, float, std::string, std::vector of those, and
@@ -43,6 +44,24 @@ namespace th::config {
 YAML::Node load_tree(const std::filesystem::path& file, const std::vector<std::string>& overrides);
 // Applies one `a.b.c=value` override in place. Throws naming the override if malformed.
 void apply_override(YAML::Node& root, const std::string& override_text);
+
+// An enum choice lists its YAML names once, found by argument-dependent lookup:
+//   enum class Coordinate { relative, absolute, none };
+//   inline const ChoiceNames<Coordinate>& choice_names(Coordinate) {
+//     static const ChoiceNames<Coordinate> names{{"relative", Coordinate::relative}, ...};
+//     return names;
+//   }
+// and is read and written by name (v.choice("coordinate", c.coordinate)).
+template <class E>
+using ChoiceNames = std::vector<std::pair<const char*, E>>;
+
+// The YAML name of an enum choice.
+template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+const char* name_of(E value) {
+  for (const auto& [name, v] : choice_names(E{}))
+    if (v == value) return name;
+  return "?";
+}
 
 namespace detail {
 
@@ -103,6 +122,25 @@ class Reader {
          "}");
   }
 
+  // A choice parsed once into an enum: the YAML names and their values.
+  template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+  void choice(const char* key, E& field) {
+    const auto& names = choice_names(E{});
+    seen_.insert(key);
+    const YAML::Node child = node_[key];
+    if (!child.IsDefined() || child.IsNull()) return;  // keep the default
+    std::string text;
+    read_value(child, detail::join_path(path_, key), text);
+    for (const auto& [name, value] : names)
+      if (text == name) {
+        field = value;
+        return;
+      }
+    std::string list;
+    for (const auto& n : names) list += std::string(list.empty() ? "" : ", ") + n.first;
+    fail("config key '", detail::join_path(path_, key), "': '", text, "' is not one of {", list, "}");
+  }
+
   // Throws naming the first key of the map that no field claimed (with the closest known key).
   void check_unknown() const;
 
@@ -145,6 +183,10 @@ class Writer {
   }
   void choice(const char* key, const std::string& field, std::initializer_list<const char*>) {
     node_[key] = field;
+  }
+  template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+  void choice(const char* key, const E& field) {
+    node_[key] = name_of(field);
   }
 
   template <class T>

@@ -31,8 +31,8 @@ void warn_once(const std::string& message, const std::string& key = "") {
 
 // Calibration that cannot be right: an error, or (data.calibration_check: warn) one warning
 // per `key` (a camera of a person).
-void implausible(const std::string& policy, const std::string& message, const std::string& key) {
-  if (policy == "error") fail(message, " (data.calibration_check: warn to go on anyway)");
+void implausible(CalibrationCheck policy, const std::string& message, const std::string& key) {
+  if (policy == CalibrationCheck::error) fail(message, " (data.calibration_check: warn to go on anyway)");
   warn_once(message + " (data.calibration_check: warn; going on)", key);
 }
 
@@ -70,7 +70,7 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
       smpl_(std::move(smpl)) {
   TORCH_CHECK(smpl_, "Dataset needs a body model");
   if (!fs::is_directory(config.root))
-    fail("data.root '", config.root, "' does not exist", config.dataset == "synthetic"
+    fail("data.root '", config.root, "' does not exist", config.dataset == DatasetKind::synthetic
          ? " (make it with: transhuman-synth --out " + config.root + ")" : "");
   for (const auto& range : setting_.humans) {
     auto human = HumanSequence::open(human_folder(config.root, range.name, config.dataset));
@@ -103,7 +103,7 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
       for (int t : targets) items_.push_back({h, frame, t});
     humans_.push_back(std::move(human));
   }
-  spdlog::info("dataset: {} '{}' — {} humans, {} samples", config.dataset, setting, humans_.size(),
+  spdlog::info("dataset: {} '{}' — {} humans, {} samples", config::name_of(config.dataset), setting, humans_.size(),
                items_.size());
 }
 
@@ -173,9 +173,9 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     Ks.push_back(view.camera.K);
     Rs.push_back(view.camera.R);
     Ts.push_back(view.camera.T);
-    if (config_.visibility == "files") {
+    if (config_.visibility == VisibilitySource::files) {
       const fs::path file = visibility_file(config_.visibility_root, human, it.frame, v);
-      if (!fs::exists(file) && config_.visibility_missing == "all_visible") {
+      if (!fs::exists(file) && config_.visibility_missing == MissingVisibility::all_visible) {
         warn_once("visibility file '" + file.string() + "' is missing: every vertex counts as visible " +
                   "(data.visibility_missing: all_visible, as the reference silently did)");
         vis.push_back(torch::ones({smpl_->num_vertices()}, torch::kBool));
@@ -199,7 +199,7 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   // Target view.
   const ViewImage target =
       load_view(human, it.frame, it.target_view,
-                {config_.ratio, true, jittered ? &jitter : nullptr, config_.border_band == "distorted"});
+                {config_.ratio, true, jittered ? &jitter : nullptr, config_.border_band == BorderBand::distorted});
   const int W = target.rgb.cols, H = target.rgb.rows;
   s.target_image = image_tensor(target.rgb);
   s.target_mask = mask_tensor(target.mask);

@@ -7,12 +7,14 @@
 #include <filesystem>
 #include <string>
 
+#include "core/config.hpp"
+
 namespace th::data {
 
 // The folder of one person by data.dataset: <root>/<name>/Posing for h36m, <root>/<name> for
 // zju_mocap and synthetic. A layout that does not match the named dataset fails naming the
 // folder it expected and the key to change.
 std::filesystem::path human_folder(const std::filesystem::path& root, const std::string& name,
-                                   const std::string& dataset);
+                                   DatasetKind dataset);
 
 }  // namespace th::data

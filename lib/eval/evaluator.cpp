@@ -15,7 +15,7 @@
 #include "data/dataset.hpp"
 #include "dist/communicator.hpp"
 #include "dist/shard.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "metrics/lpips.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/images.hpp"
@@ -52,15 +52,15 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
     csv << csv_field(r.human) << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
         << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ',' << r.points << ','
         << r.culled_points << ',' << r.evaluated_points << '\n';
-  io::detail::write_file_atomic(dir / "per_image.csv", csv.str());
+  io::write_file_atomic(dir / "per_image.csv", csv.str());
   pipeline::JsonLine j;
   j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
       .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
       .add("seconds_per_image", s.seconds_per_image)
       .add("opaque_rays_1e-3", s.opaque_1e3)
       .add("opaque_rays_1e-4", s.opaque_1e4);
-  io::detail::write_file_atomic(dir / "summary.json", j.str() + "\n");
-  io::detail::write_file_atomic(dir / "results.md", markdown_table({s}));
+  io::write_file_atomic(dir / "summary.json", j.str() + "\n");
+  io::write_file_atomic(dir / "results.md", markdown_table({s}));
 }
 
 }  // namespace
@@ -103,8 +103,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   const std::string setting = config.eval.setting;
   const auto smpl = data::load_body_model(config.data);
   auto dataset = std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
-  model::TransHuman model(config.model, config.render.cull_distance);
-  pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == "warn");
+  model::TransHuman model(config.model);
+  pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
   model->to(device);
   model->eval();
   model->set_products(model::select_products(config.precision, config.fp32_products, device));
@@ -189,7 +189,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     opaque_1e4 += rec.int64("rays opaque to 1e-4");
     const std::string panel = rec.text("panel");
     if (!panel.empty() && writes)
-      io::detail::write_file_atomic(image_dir / panel_file_name(score.human, score.frame, score.view), panel);
+      io::write_file_atomic(image_dir / panel_file_name(score.human, score.frame, score.view), panel);
     char note[64];
     std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", score.psnr, score.ssim);
     rows.at(size_t(item)) = std::move(score);

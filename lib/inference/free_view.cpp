@@ -14,7 +14,7 @@
 #include "core/progress.hpp"
 #include "dist/communicator.hpp"
 #include "dist/shard.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "video/contact_sheet.hpp"
 #include "video/frame_writer.hpp"
 
@@ -186,13 +186,13 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     const fs::path request_file = out_dir / "request.yaml";
     const std::string wanted =
         describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
-    if (fs::exists(request_file) && io::detail::read_file(request_file) != wanted) {
+    if (fs::exists(request_file) && io::read_file(request_file) != wanted) {
       if (!request.force)
         fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
              "); use another --out or --force to replace them");
       fs::remove_all(frames_dir);
     }
-    io::detail::write_file_atomic(request_file, wanted);
+    io::write_file_atomic(request_file, wanted);
     video::write_camera_path(out_dir / "cameras.yaml", {shots, width, height});
     video::FrameWriterOptions wo;
     wo.dir = frames_dir;
@@ -240,7 +240,7 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     dist::Record rec(bytes);
     render_seconds += rec.number("seconds");
     const std::string png = rec.text("frame");
-    if (writer) io::detail::write_file_atomic(writer->frame_path(int(k)), png);
+    if (writer) io::write_file_atomic(writer->frame_path(int(k)), png);
     ++summary.rendered;
     progress.advance(1, "frame " + std::to_string(k) + " body " + std::to_string(frames[size_t(k) % frames.size()]));
   };

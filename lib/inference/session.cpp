@@ -10,6 +10,7 @@
 #include "data/rays.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/pipeline.hpp"
+#include "render/chunks.hpp"
 
 namespace th::inference {
 namespace fs = std::filesystem;
@@ -21,8 +22,8 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
                                                    data::Dataset::Mode::Test, smpl);
   canonical_ = smpl->v_template;  // float64: token positions [parity]
   tokens_ = std::make_unique<pipeline::Tokens>(config.model.grouping, smpl->v_template);
-  model_ = model::TransHuman(config.model, config.render.cull_distance);
-  pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == "warn");
+  model_ = model::TransHuman(config.model);
+  pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
   model_->to(device);
   model_->eval();
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));
@@ -75,7 +76,7 @@ PreparedFrame Session::prepare(int human, int frame, int view) const {
   out.frame = frame;
   out.sample = dataset_->load_item({human, frame, view}, 0);
   out.inputs = pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
-  out.cache = model_->prepare(out.inputs);
+  out.cache = pipeline::prepare_frame(*model_, out.inputs, config_.render);
   return out;
 }
 
@@ -137,7 +138,7 @@ std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& fra
     if (r.size() == 0) continue;
     const auto vp = pixels.index({valid});
     const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
-    const auto result = model::render_rays(*model_, frame.cache, r, config);
+    const auto result = pipeline::render(*model_, frame.cache, r, config, pipeline::kInference);
     rgb.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
     depth.index_copy_(0, flat, result.depth.to(torch::kCPU, torch::kFloat32));
     acc.index_copy_(0, flat, result.acc.to(torch::kCPU, torch::kFloat32));
@@ -165,14 +166,13 @@ torch::Tensor Session::density(const PreparedFrame& frame, const torch::Tensor& 
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "density: pts must be (N, 3), got ", pts.sizes());
   torch::NoGradGuard no_grad;
   auto out = torch::zeros({pts.size(0)}, torch::kFloat32);
-  const int64_t chunk = config_.render.chunk_points;
-  for (int64_t b = 0; b < pts.size(0); b += chunk) {
-    const auto p = pts.slice(0, b, std::min(pts.size(0), b + chunk)).to(device_, torch::kFloat32);
+  render::for_each_chunk(pts.size(0), config_.render.chunk_points, [&](int64_t b, int64_t e) {
+    const auto p = pts.slice(0, b, e).to(device_, torch::kFloat32);
     const auto kept = frame.cache.geometry.body->near(p).nonzero().flatten();
-    if (kept.size(0) == 0) continue;
+    if (kept.size(0) == 0) return;
     const auto sigma = model_->density(frame.cache, p.index_select(0, kept));
-    out.slice(0, b, b + p.size(0)).index_put_({kept.cpu()}, sigma.to(torch::kCPU, torch::kFloat32));
-  }
+    out.slice(0, b, e).index_put_({kept.cpu()}, sigma.to(torch::kCPU, torch::kFloat32));
+  });
   return out;
 }
 
@@ -181,15 +181,11 @@ torch::Tensor Session::color(const PreparedFrame& frame, const torch::Tensor& pt
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3 && dirs.sizes() == pts.sizes(),
               "color: pts and dirs must be (N, 3), got ", pts.sizes(), " and ", dirs.sizes());
   torch::NoGradGuard no_grad;
-  std::vector<torch::Tensor> parts;
-  const int64_t chunk = config_.render.chunk_points;
-  for (int64_t b = 0; b < pts.size(0); b += chunk) {
-    const int64_t e = std::min(pts.size(0), b + chunk);
+  return render::cat_chunks(pts.size(0), config_.render.chunk_points, [&](int64_t b, int64_t e) {
     const auto raw = model_->forward(frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32),
                                      dirs.slice(0, b, e).to(device_, torch::kFloat32));
-    parts.push_back(torch::sigmoid(raw.slice(1, 0, 3)).to(torch::kCPU, torch::kFloat32));
-  }
-  return parts.empty() ? torch::zeros({0, 3}, torch::kFloat32) : torch::cat(parts);
+    return torch::sigmoid(raw.slice(1, 0, 3)).to(torch::kCPU, torch::kFloat32);
+  });
 }
 
 }  // namespace th::inference

@@ -12,7 +12,7 @@
 #include "core/error.hpp"
 #include "core/files.hpp"
 
-namespace th::io::detail {
+namespace th::io {
 
 std::string read_file(const std::filesystem::path& path) {
   refuse_special_file(path, "input");
@@ -47,6 +47,10 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view bytes
     th::fail("cannot write '", path.string(), "': ", ec.message());
   }
 }
+
+}  // namespace th::io
+
+namespace th::io::detail {
 
 std::string shape_repr(const std::vector<int64_t>& shape) {
   std::string out = "(";

@@ -8,15 +8,14 @@
 #include <string_view>
 #include <vector>
 
+#include "io/files.hpp"
+
 namespace th::io::detail {
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "lib/io assumes a little-endian host");
 
-// The whole file; throws th::Error naming the path when it cannot be read.
-std::string read_file(const std::filesystem::path& path);
-// Writes through a temporary file in the same folder and renames it over `path`, so readers
-// never see a half-written file. Throws th::Error naming the path.
-void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
+using io::read_file;
+using io::write_file_atomic;
 
 // Little-endian integers (the caller checks bounds).
 inline uint64_t load_le(const char* p, int n) {

@@ -247,7 +247,7 @@ void write_npy_value(const std::filesystem::path& path, const Value& object) {
 
 std::map<std::string, torch::Tensor> parse_npz(const std::string& bytes, const std::string& name) {
   std::map<std::string, torch::Tensor> arrays;
-  for (auto& member : detail::read_zip(bytes, name)) {
+  for (auto& member : read_zip(bytes, name)) {
     std::string key = member.name;
     if (key.size() >= 4 && key.compare(key.size() - 4, 4, ".npy") == 0) key.resize(key.size() - 4);
     arrays[key] = parse_npy(member.data, name + "/" + member.name);
@@ -262,7 +262,7 @@ std::map<std::string, torch::Tensor> read_npz(const std::filesystem::path& path)
 std::string npz_bytes(const std::map<std::string, torch::Tensor>& arrays) {
   std::vector<std::pair<std::string, std::string>> members;
   for (const auto& [key, array] : arrays) members.emplace_back(key + ".npy", npy_bytes(array));
-  return detail::write_zip(members);
+  return write_zip(members);
 }
 
 void write_npz(const std::filesystem::path& path,

@@ -10,7 +10,8 @@
 #include "core/files.hpp"
 #include "io/bytes.hpp"
 
-namespace th::io::detail {
+namespace th::io {
+using namespace detail;
 namespace {
 
 constexpr uint32_t kLocalSig = 0x04034b50;
@@ -264,4 +265,4 @@ std::string write_zip(const std::vector<std::pair<std::string, std::string>>& me
   return out;
 }
 
-}  // namespace th::io::detail
+}  // namespace th::io

@@ -1,6 +1,7 @@
 #pragma once
-// The little of the zip format that .npz needs (internal to lib/io): reading stored and
-// deflated members (with zip64 records, as np.savez writes them) and writing stored members.
+// The zip container of .npz files and torch.save archives: reading stored and deflated members
+// (with zip64 records, as np.savez writes them), listing an archive without reading it whole,
+// and writing stored members. Part of lib/io's public API (checkpoints are checked through it).
 
 #include <cstdint>
 #include <filesystem>
@@ -10,7 +11,7 @@
 #include <utility>
 #include <vector>
 
-namespace th::io::detail {
+namespace th::io {
 
 struct ZipMember {
   std::string name;
@@ -75,4 +76,4 @@ std::vector<ZipMember> read_zip(std::string_view archive, const std::string& nam
 // A zip of stored (uncompressed) members, dated 1980-01-01 so that the bytes are reproducible.
 std::string write_zip(const std::vector<std::pair<std::string, std::string>>& members);
 
-}  // namespace th::io::detail
+}  // namespace th::io

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 
 namespace th::mesh {
 namespace {
@@ -86,11 +86,11 @@ void write_ply(const std::filesystem::path& path, const TriMesh& mesh, const std
     append<uint8_t>(out, 3);
     for (int k = 0; k < 3; ++k) append<int32_t>(out, static_cast<int32_t>(fp[3 * i + k]));
   }
-  io::detail::write_file_atomic(path, out);
+  io::write_file_atomic(path, out);
 }
 
 TriMesh read_ply(const std::filesystem::path& path) {
-  const std::string bytes = io::detail::read_file(path);
+  const std::string bytes = io::read_file(path);
   const std::string name = path.string();
   const size_t end = bytes.find("end_header\n");
   if (bytes.rfind("ply\n", 0) != 0 || end == std::string::npos)

@@ -22,10 +22,21 @@ TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& 
   return f;
 }
 
-DPaRF::DPaRF(const DPaRFConfig& config) : config_(config) {}
-
-int64_t DPaRF::coord_dim() const {
-  return config_.coordinate == "none" ? 0 : 3 + 6 * config_.pe_freqs;
+DPaRF::DPaRF(const DPaRFConfig& config) : config_(config), fused_(config.pe_rounding == PeRounding::fused) {
+  const int64_t G = 3 + 6 * config.pe_freqs;
+  using P = torch::Tensor (DPaRF::*)(const torch::Tensor&, const FieldQuery&, torch::Tensor&, torch::Tensor&) const;
+  using T = torch::Tensor (DPaRF::*)(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const;
+  switch (config.coordinate) {
+    case Coordinate::relative:
+      form_ = {G, true, P(&DPaRF::relative_coords), T(&DPaRF::relative_coords), &DPaRF::relative_field_codes};
+      break;
+    case Coordinate::absolute:
+      form_ = {G, false, P(&DPaRF::absolute_coords), T(&DPaRF::absolute_coords), &DPaRF::absolute_field_codes};
+      break;
+    case Coordinate::none:
+      form_ = {0, false, P(&DPaRF::no_coords), T(&DPaRF::no_coords), &DPaRF::no_field_codes};
+      break;
+  }
 }
 
 torch::Tensor DPaRF::local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,
@@ -38,13 +49,63 @@ torch::Tensor DPaRF::local_coordinates(const TokenFrames& frames, const torch::T
   return (diff.unsqueeze(3) * rot).sum(2);
 }
 
-torch::Tensor DPaRF::field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
-                                     const torch::Tensor& index) const {
-  const auto n = index.size(0), k = index.size(1);
-  if (config_.coordinate == "absolute")
-    return sincos_encoding(xs, config_.pe_freqs, true, fused()).unsqueeze(1).expand({n, k, coord_dim()});
+// ---- the coordinate encodings -----------------------------------------------------------------
+
+torch::Tensor DPaRF::no_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const {
+  return torch::empty({index.size(0), index.size(1), 0}, xs.options());
+}
+
+torch::Tensor DPaRF::absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&,
+                                     torch::Tensor&) const {
+  return sincos_encoding(xs, config_.pe_freqs, true, fused_);
+}
+
+torch::Tensor DPaRF::absolute_coords(const TokenFrames&, const torch::Tensor& xs, const FieldQuery&) const {
+  return sincos_encoding(xs, config_.pe_freqs, true, fused_);
+}
+
+torch::Tensor DPaRF::absolute_field_codes(const TokenFrames&, const torch::Tensor& xs,
+                                          const torch::Tensor& index) const {
+  return sincos_encoding(xs, config_.pe_freqs, true, fused_).unsqueeze(1).expand({index.size(0), index.size(1), form_.dim});
+}
+
+torch::Tensor DPaRF::relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
+                                          const torch::Tensor& index) const {
   const auto l = local_coordinates(frames, xs, index);
-  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true, fused()).view({n, k, -1});
+  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true, fused_).view({index.size(0), index.size(1), -1});
+}
+
+torch::Tensor DPaRF::relative_coords(const TokenFrames& frames, const torch::Tensor& xs, const FieldQuery& q) const {
+  const auto g = relative_field_codes(frames, xs, q.index);  // (N, Nk, G)
+  return torch::bmm(q.weight.unsqueeze(1), g).squeeze(1);
+}
+
+torch::Tensor DPaRF::relative_coords(const torch::Tensor& x, const FieldQuery& q, torch::Tensor& local,
+                                     torch::Tensor& args) const {
+  // g_k = [l_k, sin(args)]; coords = sum_k w_k g_k.
+  args.sin_();
+  const int64_t n = x.size(0), nk = q.index.size(1), nf2 = 2 * config_.pe_freqs, G = 3 + nf2 * 3;
+  auto coords = torch::empty({n, G}, x.options());
+  AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "dparf_coords", [&] {
+    const scalar_t* w = q.weight.data_ptr<scalar_t>();
+    const scalar_t* l = local.data_ptr<scalar_t>();
+    const scalar_t* s = args.data_ptr<scalar_t>();
+    scalar_t* c = coords.data_ptr<scalar_t>();
+    at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
+      for (int64_t i = begin; i < end; ++i) {
+        scalar_t* out = c + i * G;
+        for (int64_t j = 0; j < G; ++j) out[j] = 0;
+        for (int64_t k = 0; k < nk; ++k) {
+          const scalar_t wk = w[i * nk + k];
+          const scalar_t* lk = l + (i * nk + k) * 3;
+          const scalar_t* sk = s + (i * nk + k) * nf2 * 3;
+          for (int j = 0; j < 3; ++j) out[j] += wk * lk[j];
+          for (int64_t j = 0; j < nf2 * 3; ++j) out[3 + j] += wk * sk[j];
+        }
+      }
+    });
+  });
+  return coords;
 }
 
 namespace {
@@ -137,7 +198,7 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
   if (!xs.device().is_cpu() || xs.requires_grad()) return query_tensors(frames, xs);
   const int64_t nk = config_.nk, nt = frames.origins.size(0), n = xs.size(0);
   TORCH_CHECK(nt >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", nt);
-  const bool relative = config_.coordinate == "relative";
+  const bool relative = form_.local;
   const int64_t nf2 = 2 * config_.pe_freqs;
   const auto x = xs.contiguous();
   const auto O = frames.origins.to(x.dtype()).contiguous();
@@ -158,38 +219,12 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
       nearest_fields<scalar_t>(x.data_ptr<scalar_t>(), O.data_ptr<scalar_t>(), axes.data_ptr<scalar_t>(),
                                R.data_ptr<scalar_t>(), nt, nk,
                                config_.softmax_temperature, freqs.data_ptr<scalar_t>(),
-                               phases.data_ptr<scalar_t>(), nf2, fused(), begin, end, q.index.data_ptr<int64_t>(),
+                               phases.data_ptr<scalar_t>(), nf2, fused_, begin, end, q.index.data_ptr<int64_t>(),
                                q.weight.data_ptr<scalar_t>(), relative ? local.data_ptr<scalar_t>() : nullptr,
                                relative ? args.data_ptr<scalar_t>() : nullptr);
     });
   });
-  if (config_.coordinate == "absolute") {
-    q.coords = sincos_encoding(x, config_.pe_freqs, true, fused());
-  } else if (relative) {
-    // g_k = [l_k, sin(args)]; coords = sum_k w_k g_k.
-    args.sin_();
-    const int64_t G = 3 + nf2 * 3;
-    q.coords = torch::empty({n, G}, x.options());
-    AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "dparf_coords", [&] {
-      const scalar_t* w = q.weight.data_ptr<scalar_t>();
-      const scalar_t* l = local.data_ptr<scalar_t>();
-      const scalar_t* s = args.data_ptr<scalar_t>();
-      scalar_t* c = q.coords.data_ptr<scalar_t>();
-      at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
-        for (int64_t i = begin; i < end; ++i) {
-          scalar_t* out = c + i * G;
-          for (int64_t j = 0; j < G; ++j) out[j] = 0;
-          for (int64_t k = 0; k < nk; ++k) {
-            const scalar_t wk = w[i * nk + k];
-            const scalar_t* lk = l + (i * nk + k) * 3;
-            const scalar_t* sk = s + (i * nk + k) * nf2 * 3;
-            for (int j = 0; j < 3; ++j) out[j] += wk * lk[j];
-            for (int64_t j = 0; j < nf2 * 3; ++j) out[3 + j] += wk * sk[j];
-          }
-        }
-      });
-    });
-  }
+  q.coords = (this->*form_.from_pass)(x, q, local, args);
   return q;
 }
 
@@ -206,12 +241,7 @@ FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& 
   const auto diff = xs.unsqueeze(1) - O.index_select(0, q.index.flatten()).view({n, nk, 3});
   const auto dist = diff.norm(2, -1);
   q.weight = torch::softmax(-dist / config_.softmax_temperature, 1);
-  if (config_.coordinate == "absolute") {
-    q.coords = sincos_encoding(xs, config_.pe_freqs, true, fused());
-  } else if (config_.coordinate == "relative") {
-    const auto g = field_encodings(frames, xs, q.index);  // (N, Nk, G)
-    q.coords = torch::bmm(q.weight.unsqueeze(1), g).squeeze(1);
-  }
+  q.coords = (this->*form_.from_tensors)(frames, xs, q);
   return q;
 }
 
@@ -222,7 +252,7 @@ torch::Tensor DPaRF::features(const TokenFrames& frames, const torch::Tensor& to
   std::vector<torch::Tensor> per_view;
   for (int64_t v = 0; v < V; ++v) {
     auto t = tokens[v].index_select(0, q.index.flatten()).view({n, nk, -1});  // (N, Nk, C)
-    if (coord_dim() > 0) t = torch::cat({t, field_encodings(frames, xs, q.index)}, -1);
+    t = torch::cat({t, (this->*form_.per_field)(frames, xs, q.index)}, -1);  // [T_v(k); g_k]
     per_view.push_back((q.weight.unsqueeze(-1) * t).sum(1));
   }
   return torch::stack(per_view, 1);

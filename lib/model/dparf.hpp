@@ -28,10 +28,11 @@ struct FieldQuery {
 
 class DPaRF {
  public:
+  // The coordinate encoding's form (relative, absolute or none) is chosen here, once.
   explicit DPaRF(const DPaRFConfig& config);
 
   // Width G of the coordinate encoding: 63 for relative/absolute (10 frequencies), 0 for none.
-  int64_t coord_dim() const;
+  int64_t coord_dim() const { return form_.dim; }
 
   // xs: (N, 3) points in the SMPL frame. On CPU one pass per point (nearest fields, weights,
   // local coordinates, encoding arguments) plus one vectorised sin; elsewhere tensor ops
@@ -48,14 +49,34 @@ class DPaRF {
   torch::Tensor features(const TokenFrames& frames, const torch::Tensor& tokens,
                          const torch::Tensor& xs) const;
 
-  const DPaRFConfig& config() const { return config_; }
-
  private:
-  bool fused() const { return config_.pe_rounding == "fused"; }  // METHOD 3.3 [parity]
-  // Per-field encodings g_k: (N, Nk, G).
-  torch::Tensor field_encodings(const TokenFrames& frames, const torch::Tensor& xs,
-                                const torch::Tensor& index) const;
+  // The coordinate encoding in its three uses: from the CPU pass's local coordinates and sine
+  // arguments, from tensors, and per field g_k (N, Nk, G).
+  struct CoordinateForm {
+    int64_t dim = 0;
+    bool local = false;  // the CPU pass computes local coordinates and encoding arguments
+    torch::Tensor (DPaRF::*from_pass)(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
+                                      torch::Tensor& args) const;
+    torch::Tensor (DPaRF::*from_tensors)(const TokenFrames& frames, const torch::Tensor& xs,
+                                         const FieldQuery& q) const;
+    torch::Tensor (DPaRF::*per_field)(const TokenFrames& frames, const torch::Tensor& xs,
+                                      const torch::Tensor& index) const;
+  };
+  torch::Tensor no_coords(const torch::Tensor&, const FieldQuery&, torch::Tensor&, torch::Tensor&) const { return {}; }
+  torch::Tensor no_coords(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const { return {}; }
+  torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const;
+  torch::Tensor absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&, torch::Tensor&) const;
+  torch::Tensor absolute_coords(const TokenFrames&, const torch::Tensor& xs, const FieldQuery&) const;
+  torch::Tensor absolute_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const;
+  torch::Tensor relative_coords(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
+                                torch::Tensor& args) const;
+  torch::Tensor relative_coords(const TokenFrames& frames, const torch::Tensor& xs, const FieldQuery& q) const;
+  torch::Tensor relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
+                                     const torch::Tensor& index) const;
+
   DPaRFConfig config_;
+  bool fused_;  // pe_rounding: fused [parity] (METHOD 3.3)
+  CoordinateForm form_;
 };
 
 }  // namespace th::model

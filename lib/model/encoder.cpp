@@ -169,11 +169,6 @@ std::vector<torch::Tensor> ResNetTrunkImpl::forward(const torch::Tensor& x) {
 
 // ---- geometry of sampling --------------------------------------------------------------------
 
-Taps PixelGeometry::level_taps(const torch::Tensor& uv, const torch::Tensor& view, size_t level,
-                               int64_t row_offset) const {
-  return multi_level_taps(uv, view, {level_sizes.at(level)}, {row_offset}, height, width);
-}
-
 Taps PixelGeometry::stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const {
   std::vector<int64_t> offsets;
   int64_t offset = 0;
@@ -194,13 +189,20 @@ torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_tap
   return out.add_(bias);
 }
 
+void PixelReadout::visit(const TensorVisitor& fn) {
+  fn(table, &table_grad_sink);
+  fn(image_table, nullptr);
+  fn(image_weight, nullptr);
+  fn(bias, nullptr);
+}
+
 // ---- encoder ---------------------------------------------------------------------------------
 
-EncoderImpl::EncoderImpl(const EncoderConfig& config, bool raw_rgb) : raw_rgb_(raw_rgb) {
-  const bool batch_stats = config.batchnorm == "batch";
-  model = register_module("model", ResNetTrunk(batch_stats));
-  reduction_layer = register_module("reduction_layer", conv(pixel_channels(), 192, 1, 1, 0, true));
-  if (raw_rgb_) upsample_color = register_module("upsample_color", conv(3, 128, 1, 1, 0, true));
+EncoderImpl::EncoderImpl(const EncoderConfig& config, bool raw_rgb, int64_t holder_channels) {
+  model = register_module("model", ResNetTrunk(config.batchnorm == BatchNormStats::batch));
+  // Registered (and initialised) in this order: the random initial weights depend on it.
+  reduction_layer = register_module("reduction_layer", conv(raw_rgb ? 384 : 256, holder_channels, 1, 1, 0, true));
+  if (raw_rgb) upsample_color = register_module("upsample_color", conv(3, 128, 1, 1, 0, true));
 }
 
 EncodedViews EncoderImpl::forward(const torch::Tensor& images) {
@@ -220,7 +222,7 @@ torch::Tensor EncoderImpl::pixel_features(const EncodedViews& enc) const {
   const auto H = enc.geometry.height, W = enc.geometry.width;
   std::vector<torch::Tensor> parts;
   for (const auto& l : enc.levels) parts.push_back(upsample(l, H, W));
-  if (raw_rgb_) parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
+  if (upsample_color) parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
   return torch::cat(parts, 1);
 }
 
@@ -238,11 +240,19 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
     offset += l.size(0) * l.size(2) * l.size(3);
     col += taps_per_level;
   }
-  if (raw_rgb_) {
+  if (upsample_color) {
     const auto rgb = weighted_gather(to_table(enc.images), image_taps);
     parts.push_back(F::linear(rgb, upsample_color->weight.flatten(1), upsample_color->bias));
   }
   return torch::cat(parts, 1);
+}
+
+torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const torch::Tensor& uv) const {
+  const auto n = uv.size(0), V = uv.size(1);
+  const auto flat = uv.reshape({-1, 2});
+  const auto view = torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(uv.device())).repeat({n});
+  return sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view), enc.geometry.image_taps(flat, view))
+      .view({n, V, -1});
 }
 
 std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::TensorOptions& options) const {
@@ -300,9 +310,7 @@ PixelReadout EncoderImpl::make_readout(const EncodedViews& enc, const torch::Ten
   r.table = torch::cat(tables, 0);
   r.image_table = to_table(enc.images).detach();
   r.bias = bias;
-  r.weight = weight;
-  r.layer_bias = bias;
-  if (raw_rgb_) {
+  if (upsample_color) {
     const auto wc = weight.slice(1, 256, 384);  // (Cout, 128)
     r.image_weight = torch::mm(wc, upsample_color->weight.flatten(1));
     r.bias = bias + torch::mv(wc, upsample_color->bias);
@@ -358,14 +366,6 @@ torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& 
   const auto out = F::grid_sample(map, grid,
                                   F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(true));
   return out.squeeze(2).permute({2, 0, 1});  // (N, V, C)
-}
-
-torch::Tensor project_points(const torch::Tensor& pts, const torch::Tensor& K,
-                             const torch::Tensor& R, const torch::Tensor& T) {
-  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
-  const auto cam = torch::matmul(pts.unsqueeze(0), R.transpose(1, 2)) + T.reshape({-1, 1, 3});
-  const auto img = torch::matmul(cam, K.transpose(1, 2));
-  return img.narrow(2, 0, 2) / img.narrow(2, 2, 1);
 }
 
 }  // namespace th::model

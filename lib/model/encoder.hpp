@@ -78,11 +78,8 @@ struct PixelGeometry {
   std::vector<std::pair<int64_t, int64_t>> level_sizes;  // (h, w) per ResNet level
 
   // Taps for points uv: (M, 2) pixel coordinates, view: (M) int64, into
-  // - one level's table (V h_l w_l rows, plus row_offset),
   // - all levels stacked in one table (level 0 of all views, then level 1, ...),
   // - the image table (V H W rows; plain bilinear).
-  Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, size_t level,
-                  int64_t row_offset = 0) const;
   Taps stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
   Taps image_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
 };
@@ -103,14 +100,10 @@ struct PixelReadout {
   torch::Tensor image_weight;  // (Cout, 3) composed weight of the raw-RGB channels; undefined w/o RGB
   torch::Tensor bias;          // (Cout)
   torch::Tensor table_grad_sink;  // optional, see weighted_gather
-  // The layer itself, (Cout, Cpix) and (Cout), for points outside the windows (window form).
-  torch::Tensor weight, layer_bias;
-  // Window form (inference, model/shortcuts.hpp): y at every pixel of the windows, stacked as
-  // PixelWindows orders them, (rows, Cout); `table` is then undefined.
-  torch::Tensor window_table;
 
   // level_taps/image_taps from PixelGeometry for M points; returns (M, Cout).
   torch::Tensor sample(const Taps& level_taps, const Taps& image_taps) const;
+  void visit(const TensorVisitor& fn);
 };
 
 // One rectangle of pixels per view, [x0, x0 + w) x [y0, y0 + h), whose pixels are stacked view
@@ -130,29 +123,39 @@ struct PixelWindows {
                                       int64_t W) const;
 };
 
+// A readout in window form (inference, model/shortcuts.hpp): y at every pixel of the windows,
+// stacked as PixelWindows orders them, and the layer itself for points outside the windows.
+struct WindowReadout {
+  torch::Tensor table;               // (rows, Cout)
+  torch::Tensor weight, layer_bias;  // (Cout, Cpix), (Cout): the layer's own parameters
+  void visit(const TensorVisitor& fn) { fn(table, nullptr); }
+};
+
 class EncoderImpl : public torch::nn::Module {
  public:
-  // raw_rgb: include the 128 upsample_color channels in p_v (false: the "w/o RGB" ablation).
-  EncoderImpl(const EncoderConfig& config, bool raw_rgb);
+  // raw_rgb: include the 128 upsample_color channels in p_v (false: the "w/o RGB" ablation);
+  // holder_channels: the width of the painted features (the reduction layer's output), which
+  // is model.transhe.dim.
+  EncoderImpl(const EncoderConfig& config, bool raw_rgb, int64_t holder_channels);
 
   // images: (V, 3, H, W) in [0, 1] (no mean/std normalisation [parity]).
   EncodedViews forward(const torch::Tensor& images);
 
-  int64_t pixel_channels() const { return raw_rgb_ ? 384 : 256; }
-  int64_t holder_channels() const { return 192; }
-  bool raw_rgb() const { return raw_rgb_; }
+  int64_t pixel_channels() const { return upsample_color ? 384 : 256; }
 
   // The full-resolution pixel feature (V, 384, H, W) of the reference (direct path, tests).
   torch::Tensor pixel_features(const EncodedViews& enc) const;
   // p_v at M points without materialising it; returns (M, 384).
   torch::Tensor sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                       const Taps& image_taps) const;
+  // The same at projections uv (N, V, 2) of the views -> (N, V, 384).
+  torch::Tensor sample_pixel_features(const EncodedViews& enc, const torch::Tensor& uv) const;
   // Per-level precomputation of y = W p + b. weight: (Cout, 384), bias: (Cout).
   PixelReadout make_readout(const EncodedViews& enc, const torch::Tensor& weight,
                             const torch::Tensor& bias) const;
 
-  // METHOD 3.1 painting: holder features (192) at the projections of the body vertices, zero
-  // where the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, 192).
+  // METHOD 3.1 painting: holder features at the projections of the body vertices, zero where
+  // the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, holder channels).
   torch::Tensor paint(const EncodedViews& enc, const torch::Tensor& uv,
                       const torch::Tensor& visibility) const;
   // The same the reference's way: materialise reduction(pixel_features) and grid_sample it.
@@ -164,20 +167,12 @@ class EncoderImpl : public torch::nn::Module {
   void load_resnet_state(const std::map<std::string, torch::Tensor>& state, const std::string& source);
 
   ResNetTrunk model{nullptr};
-  torch::nn::Conv2d reduction_layer{nullptr}, upsample_color{nullptr};
-
- private:
-  bool raw_rgb_;
+  torch::nn::Conv2d reduction_layer{nullptr}, upsample_color{nullptr};  // upsample_color: null w/o RGB
 };
 TORCH_MODULE(Encoder);
 
 // grid_sample(bilinear, border, align_corners=true) of maps at pixel coordinates, with the
 // reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
 torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv);
-
-// Pinhole projection x_cam = R x + T, uv = (K x_cam)[:2] / z (METHOD 2.2).
-// pts: (N, 3) world; K, R: (V, 3, 3); T: (V, 3, 1) -> (V, N, 2) pixel coordinates.
-torch::Tensor project_points(const torch::Tensor& pts, const torch::Tensor& K,
-                             const torch::Tensor& R, const torch::Tensor& T);
 
 }  // namespace th::model

@@ -158,7 +158,7 @@ struct ViewAttention : torch::autograd::Function<ViewAttention> {
 
 }  // namespace
 
-FDIImpl::FDIImpl(const FDIConfig& config_, int64_t pixel_channels) : config(config_) {
+FDIImpl::FDIImpl(const FDIConfig& config, int64_t pixel_channels) {
   if (config.appearance) {
     alpha_res_0 = register_module("alpha_res_0", torch::nn::Linear(pixel_channels, 256));
     key0 = register_module("key0", torch::nn::Linear(256, 128));
@@ -170,6 +170,9 @@ FDIImpl::FDIImpl(const FDIConfig& config_, int64_t pixel_channels) : config(conf
   }
   fc_1 = register_module("fc_1", torch::nn::Linear(256, 256));
   fc_2 = register_module("fc_2", torch::nn::Linear(256, 256));
+  if (config.appearance && config.human) fusion_ = {&FDIImpl::cross, &FDIImpl::cross_folded, &FDIImpl::fold_cross};
+  else if (config.appearance) fusion_ = {&FDIImpl::self, &FDIImpl::self_folded, &FDIImpl::fold_self};
+  else fusion_ = {&FDIImpl::human_only, &FDIImpl::human_only_folded, &FDIImpl::fold_human_only};
 }
 
 torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k) {
@@ -187,40 +190,93 @@ torch::Tensor FDIImpl::attend(const torch::Tensor& qr, const torch::Tensor& kv, 
   return ViewAttention::apply(qr, kv, d);
 }
 
-torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a, const Products& P) {
-  // Products in the compute type; the attention's scores and softmax in fp32.
-  auto layer = [&](const torch::nn::Linear& l, const torch::Tensor& x) { return P.linear(x, l->weight, l->bias); };
-  auto fp32 = [&](const torch::nn::Linear& l, const torch::Tensor& x) { return Products::fp32(layer(l, x)); };
-  torch::Tensor o;
-  if (config.appearance && config.human) {
-    const auto att = attention(fp32(key1, s), fp32(key0, a));
-    o = fp32(value1, s) + torch::bmm(att, fp32(value0, a));
-  } else if (config.appearance) {
-    const auto k = fp32(key0, a);
-    o = fp32(value0, a);
-    o = o + torch::bmm(attention(k, k), o);
-  } else {
-    o = value1(s);
-  }
-  return torch::relu(layer(fc_2, torch::relu(layer(fc_1, o))));
+// ---- the reference computation: products in the compute type, scores and softmax in fp32 ----
+
+namespace {
+torch::Tensor layer(const torch::nn::Linear& l, const torch::Tensor& x, const Products& P) {
+  return P.linear(x, l->weight, l->bias);
 }
+torch::Tensor layer_fp32(const torch::nn::Linear& l, const torch::Tensor& x, const Products& P) {
+  return Products::fp32(layer(l, x, P));
+}
+}  // namespace
+
+torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a, const Products& P) {
+  const auto o = (this->*fusion_.fuse)(s, a, P);
+  return torch::relu(layer(fc_2, torch::relu(layer(fc_1, o, P)), P));
+}
+
+torch::Tensor FDIImpl::cross(const torch::Tensor& s, const torch::Tensor& a, const Products& P) {
+  const auto att = attention(layer_fp32(key1, s, P), layer_fp32(key0, a, P));
+  return layer_fp32(value1, s, P) + torch::bmm(att, layer_fp32(value0, a, P));
+}
+
+torch::Tensor FDIImpl::self(const torch::Tensor&, const torch::Tensor& a, const Products& P) {
+  const auto k = layer_fp32(key0, a, P);
+  const auto o = layer_fp32(value0, a, P);
+  return o + torch::bmm(attention(k, k), o);
+}
+
+torch::Tensor FDIImpl::human_only(const torch::Tensor& s, const torch::Tensor&, const Products&) {
+  return value1(s);
+}
+
+// ---- the folded form ---------------------------------------------------------------------------
 
 torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
                                       const Products& P) {
-  torch::Tensor pre;
-  if (config.appearance && config.human) {
-    // (N, V, 128 + 256) each; the attention kernel takes fp32
-    const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
-    const auto qr = Products::fp32(P.linear(s, f.w1, f.b1));
-    pre = attend(qr, kv, 128);
-  } else if (config.appearance) {
-    const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
-    const auto k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256);
-    pre = torch::baddbmm(u + fc_1->bias, attention(k, k), u);
-  } else {
-    pre = P.linear(s, f.w1, f.b1);
-  }
+  auto pre = (this->*fusion_.fuse_folded)(f, s, a, P);
   return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();
+}
+
+torch::Tensor FDIImpl::cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                                    const Products& P) {
+  // (N, V, 128 + 256) each; the attention kernel takes fp32
+  const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
+  const auto qr = Products::fp32(P.linear(s, f.w1, f.b1));
+  return attend(qr, kv, 128);
+}
+
+torch::Tensor FDIImpl::self_folded(const FDIFolded& f, const torch::Tensor&, const torch::Tensor& a,
+                                   const Products& P) {
+  const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
+  const auto k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256);
+  return torch::baddbmm(u + fc_1->bias, attention(k, k), u);
+}
+
+torch::Tensor FDIImpl::human_only_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor&,
+                                         const Products& P) {
+  return P.linear(s, f.w1, f.b1);
+}
+
+// fc_1 is linear: folded into both value projections; each key projection shares one product
+// with its value projection. fc_1's bias joins the query side where there is one (the attention
+// weights multiply the value side).
+
+FDIFolded FDIImpl::fold_cross() const {
+  const auto& W1 = fc_1->weight;
+  FDIFolded f;
+  f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
+  f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
+  f.w1 = torch::cat({key1->weight, torch::mm(W1, value1->weight)}, 0);
+  f.b1 = torch::cat({key1->bias, torch::mv(W1, value1->bias) + fc_1->bias}, 0);
+  return f;
+}
+
+FDIFolded FDIImpl::fold_self() const {
+  const auto& W1 = fc_1->weight;
+  FDIFolded f;
+  f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
+  f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
+  return f;
+}
+
+FDIFolded FDIImpl::fold_human_only() const {
+  const auto& W1 = fc_1->weight;
+  FDIFolded f;
+  f.w1 = torch::mm(W1, value1->weight);
+  f.b1 = torch::mv(W1, value1->bias) + fc_1->bias;
+  return f;
 }
 
 }  // namespace th::model

@@ -39,11 +39,39 @@ class FDIImpl : public torch::nn::Module {
   // backward (batched products of the tiny per-point matrices are slow); elsewhere bmm.
   static torch::Tensor attend(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d);
 
+  // The folded weights of this fusion (model/shortcuts.hpp folds them once per frame).
+  FDIFolded fold() const { return (this->*fusion_.fold)(); }
+
   torch::nn::Linear alpha_res_0{nullptr};       // appearance: p_v -> a_v (384 -> 256)
   torch::nn::Linear key0{nullptr}, value0{nullptr};  // appearance side (spatial_key_value_0)
   torch::nn::Linear key1{nullptr}, value1{nullptr};  // query side (spatial_key_value_1)
   torch::nn::Linear fc_1{nullptr}, fc_2{nullptr};
-  FDIConfig config;
+
+ private:
+  // One fusion of s and a (the paper's, and each ablation's), in its three forms: o_v from the
+  // layers, fc_1's input pre-activation from folded weights, and the folding itself. Chosen
+  // once in the constructor from FDIConfig.
+  struct Fusion {
+    torch::Tensor (FDIImpl::*fuse)(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+    torch::Tensor (FDIImpl::*fuse_folded)(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                                          const Products& p);
+    FDIFolded (FDIImpl::*fold)() const;
+  };
+  // Cross-attention over the views: queries from s, keys and values from a (the paper's).
+  torch::Tensor cross(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  torch::Tensor cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  FDIFolded fold_cross() const;
+  // "w/o h": self-attention of the appearance features.
+  torch::Tensor self(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  torch::Tensor self_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  FDIFolded fold_self() const;
+  // "w/o a": o_v = value1(s_v).
+  torch::Tensor human_only(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  torch::Tensor human_only_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                                  const Products& p);
+  FDIFolded fold_human_only() const;
+
+  Fusion fusion_;
 };
 TORCH_MODULE(FDI);
 

@@ -4,30 +4,53 @@
 
 namespace th::model {
 
-void FrameCache::visit(const std::function<void(torch::Tensor&, torch::Tensor*)>& fn) {
-  auto& g = geometry;
-  for (auto* t : {&g.K, &g.R, &g.T, &g.Rh, &g.Th}) fn(*t, nullptr);
-  auto& px = pixels;
-  fn(px.pixel, nullptr);
-  for (auto& level : px.levels) fn(level, nullptr);
-  fn(px.images, nullptr);
-  for (auto* r : {&px.alpha, &px.color}) {
-    fn(r->table, &r->table_grad_sink);
-    fn(r->image_table, nullptr);
-    fn(r->image_weight, nullptr);
-    fn(r->bias, nullptr);
-    fn(r->window_table, nullptr);  // (r->weight and layer_bias are the layer's parameters)
-  }
-  auto& h = human;
-  fn(h.frames.origins, nullptr);
-  fn(h.frames.rotations, nullptr);
-  fn(h.tokens, nullptr);
-  fn(h.table, &h.table_grad_sink);
-  for (auto* t : {&h.grid, &h.lo, &h.extent}) fn(*t, nullptr);
-  auto& f = folded;
-  for (auto* t : {&f.fdi.w0, &f.fdi.b0, &f.fdi.w1, &f.fdi.b1, &f.heads.e_weight, &f.heads.e_bias,
-                  &f.heads.readout_weight, &f.heads.readout_bias})
+void FrameGeometry::visit(const TensorVisitor& fn) {
+  for (auto* t : {&K, &R, &T, &Rh, &Th}) fn(*t, nullptr);
+}
+
+void PixelLevels::visit(const TensorVisitor& fn) {
+  for (auto& level : enc.levels) fn(level, nullptr);
+  fn(enc.images, nullptr);
+}
+
+void PixelReadouts::visit(const TensorVisitor& fn) {
+  alpha.visit(fn);
+  color.visit(fn);
+}
+
+void WindowReadouts::visit(const TensorVisitor& fn) {
+  levels.visit(fn);
+  alpha.visit(fn);
+  color.visit(fn);
+}
+
+void TokenStage::visit(const TensorVisitor& fn) {
+  fn(frames.origins, nullptr);
+  fn(frames.rotations, nullptr);
+  fn(tokens, nullptr);
+}
+
+void TokenTableStage::visit(const TensorVisitor& fn) {
+  fn(frames.origins, nullptr);
+  fn(frames.rotations, nullptr);
+  fn(table, &table_grad_sink);
+}
+
+void SPCStage::visit(const TensorVisitor& fn) {
+  for (auto* t : {&grid, &lo, &extent}) fn(*t, nullptr);
+}
+
+void FoldedWeights::visit(const TensorVisitor& fn) {
+  for (auto* t : {&fdi.w0, &fdi.b0, &fdi.w1, &fdi.b1, &heads.e_weight, &heads.e_bias, &heads.readout_weight,
+                  &heads.readout_bias})
     fn(*t, nullptr);
+}
+
+void FrameCache::visit(const TensorVisitor& fn) {
+  geometry.visit(fn);
+  std::visit([&](auto& stage) { stage.visit(fn); }, pixels);
+  std::visit([&](auto& stage) { stage.visit(fn); }, human);
+  std::visit([&](auto& stage) { stage.visit(fn); }, network);
 }
 
 double FrameCache::nbytes() const {

@@ -5,14 +5,17 @@
 // chunk of points reads it. Under autograd the tensors keep their history back to the encoder,
 // the transformer and the layer weights (training).
 //
-// Each stage has a reference form and, with model.exact_shortcuts, the form METHOD 9's exact
-// shortcuts give it (model/shortcuts.hpp makes those; a field is undefined when its form is
-// not in use).
+// A stage holds one of its forms (std::variant): the type says which form is in use, and the
+// form was chosen once, when the model was built (model/forms.hpp). Each form lists its tensors
+// in `visit`; a test walks the autograd graph of the per-point network and fails when it
+// reaches per-frame work through a tensor that no stage visits (tests/model/test_frame_cache.cpp).
+// Parameters that a stage merely refers to are leaves already and are not visited.
 
 #include <torch/types.h>
 
 #include <functional>
 #include <memory>
+#include <variant>
 #include <vector>
 
 #include "model/dparf.hpp"
@@ -27,60 +30,101 @@ namespace th::model {
 struct FrameGeometry {
   torch::Tensor K, R, T;  // (V, 3, 3), (V, 3, 3), (V, 3, 1) reference cameras
   torch::Tensor Rh, Th;   // (3, 3), (3): x_smpl = (x_world - Th) Rh
-  std::shared_ptr<const render::BodyDistance> body;  // distance culling (METHOD 4, 9)
+  // Distance to the body for culling (METHOD 4, 9); null when prepared without a culling distance.
+  std::shared_ptr<const render::BodyDistance> body;
+  void visit(const TensorVisitor& fn);
 };
 
 // The painted body (METHOD 3.1): the reference views' holder features at the body's vertices,
 // input of the human representation; not kept past prepare().
 struct PaintedBody {
-  torch::Tensor features;     // (V, Nv, 192), zero where the vertex is invisible in a view
+  torch::Tensor features;     // (V, Nv, C), zero where the vertex is invisible in a view
   torch::Tensor xs_vertices;  // (Nv, 3) posed vertices in the SMPL frame
 };
 
-// The encoder stage as per-point sampling reads it (METHOD 3.1): p_v at the projections.
-struct PixelStage {
-  PixelGeometry geometry;  // views, image size and level sizes
-  // Reference form: p_v materialised, (V, Cpix, H, W) (encoder.fast_sampling false).
-  torch::Tensor pixel;
-  // Fast sampling: the ResNet levels and the images; p_v sampled exactly from them.
-  std::vector<torch::Tensor> levels;
-  torch::Tensor images;
-  // Exact shortcuts: the linear layers that read p_v applied once per level (METHOD 9), for the
-  // appearance feature (FDI's alpha_res_0) and for the colour head (folded readout).
-  PixelReadout alpha, color;
-  // Readout windows (inference, METHOD 9, model/shortcuts.hpp): where the readouts' window
-  // tables lie; levels and images above then serve the points outside them.
-  PixelWindows windows;
-};
+// ---- pixel stage: what per-point sampling reads of the encoder output (METHOD 3.1, 9) -------
 
-// The human representation stage read by DPaRF (METHOD 3.2, 3.3), or the SPC baseline's volume.
-struct HumanStage {
-  TokenFrames frames;  // token frames (origins, rotations) of the non-empty tokens
-  // Reference form: the tokens T_v after TransHE, (V, Nt, C).
+// "w/o a" ablation: nothing is read.
+struct NoPixels {
+  void visit(const TensorVisitor&) {}
+};
+// Reference form: p_v materialised, (V, Cpix, H, W) (encoder.fast_sampling false).
+struct PixelMap {
+  torch::Tensor pixel;
+  void visit(const TensorVisitor& fn) { fn(pixel, nullptr); }
+};
+// Fast sampling: the ResNet levels and the images; p_v sampled exactly from them.
+struct PixelLevels {
+  EncodedViews enc;
+  void visit(const TensorVisitor& fn);
+};
+// Exact shortcuts: the linear layers that read p_v applied once per level (METHOD 9), for the
+// appearance feature (FDI's alpha_res_0) and for the colour head (folded readout).
+struct PixelReadouts {
+  PixelGeometry geometry;
+  PixelReadout alpha, color;
+  void visit(const TensorVisitor& fn);
+};
+// Readout windows (inference on CPU, model/shortcuts.hpp): the readouts at full resolution on a
+// rectangle of each view around the body; the levels serve the points outside them.
+struct WindowReadouts {
+  PixelLevels levels;
+  PixelWindows windows;
+  WindowReadout alpha, color;
+  void visit(const TensorVisitor& fn);
+};
+using PixelStage = std::variant<NoPixels, PixelMap, PixelLevels, PixelReadouts, WindowReadouts>;
+
+// ---- human stage: read by DPaRF (METHOD 3.2, 3.3), or the SPC baseline's volume --------------
+
+// "w/o h" ablation.
+struct NoHuman {
+  void visit(const TensorVisitor&) {}
+};
+// Reference form: the token frames and the tokens T_v after TransHE, (V, Nt, C).
+struct TokenStage {
+  TokenFrames frames;
   torch::Tensor tokens;
-  // Exact shortcut: fc_0's token part applied to the tokens, (Nt, V * 256) (METHOD 9).
+  void visit(const TensorVisitor& fn);
+};
+// Exact shortcut: fc_0's token part applied to the tokens, (Nt, V * 256) (METHOD 9).
+struct TokenTableStage {
+  TokenFrames frames;
   torch::Tensor table;
   torch::Tensor table_grad_sink;  // see weighted_gather (chunked recomputation)
-  // SPC baseline: the convolved feature volume, its corner and extent in the SMPL frame.
-  torch::Tensor grid, lo, extent;
+  void visit(const TensorVisitor& fn);
 };
+// SPC baseline: the convolved feature volume, its corner and extent in the SMPL frame.
+struct SPCStage {
+  torch::Tensor grid, lo, extent;
+  void visit(const TensorVisitor& fn);
+};
+using HumanStage = std::variant<NoHuman, TokenStage, TokenTableStage, SPCStage>;
 
+// ---- network stage: the per-point layers' weights ---------------------------------------------
+
+// Reference form: the layers use their own parameters.
+struct LayerWeights {
+  void visit(const TensorVisitor&) {}
+};
 // Folded layer weights (METHOD 9), once per frame: FDI's and the colour head's products.
 struct FoldedWeights {
   FDIFolded fdi;
   HeadsFolded heads;
+  void visit(const TensorVisitor& fn);
 };
+using NetworkStage = std::variant<LayerWeights, FoldedWeights>;
 
 struct FrameCache {
   FrameGeometry geometry;
   PixelStage pixels;
   HumanStage human;
-  FoldedWeights folded;
+  NetworkStage network;
 
   // Every tensor of the state, visited in a fixed order, with its gradient-sink slot where the
   // tensor is a table read by weighted_gather (null otherwise). The checkpointed recomputation
   // swaps the tensors that require a gradient for leaves; memory accounting sums them.
-  void visit(const std::function<void(torch::Tensor& tensor, torch::Tensor* grad_sink)>& fn);
+  void visit(const TensorVisitor& fn);
   // Bytes held by the defined tensors (shared tensors counted once).
   double nbytes() const;
 };

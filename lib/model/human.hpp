@@ -2,7 +2,8 @@
 // The human representation branch h of METHOD 3 (selected by model.representation):
 // - TokenFields: TransHE tokens (METHOD 3.2) read through DPaRF (METHOD 3.3) — the paper's model;
 // - SPCTrilinear (spc.hpp): the NHP-style baseline of the ablations.
-// Both end in fc_0 and return s_v = relu(fc_0(h_v)) per reference view.
+// Both end in fc_0 and return s_v = relu(fc_0(h_v)) per reference view. The form of each is
+// fixed when it is built (make_human_representation).
 
 #include <torch/torch.h>
 
@@ -20,30 +21,45 @@ namespace th::model {
 class HumanRepresentation : public torch::nn::Module {
  public:
   // The per-frame part: the painted body -> the human stage of the frame state.
-  virtual void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) = 0;
+  virtual HumanStage prepare(const FrameInputs& in, const PaintedBody& body) = 0;
   // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32; its
-  // products as `products` says (model/precision.hpp).
+  // products as `products` says (model/precision.hpp). `stage` is what prepare() made.
   virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) = 0;
 };
 
-// TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*).
+// TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*),
+// in the reference form: the Nk nearest tokens gathered and fc_0 applied per point (TokenStage).
 class TokenFieldsImpl : public HumanRepresentation {
  public:
   explicit TokenFieldsImpl(const ModelConfig& config);
 
-  void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
+  HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
   torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
 
-  TransHE vit{nullptr};
+  TransHE vit{nullptr};  // null: the "w/o TransHE" ablation
   torch::nn::Linear fc_0{nullptr};
   DPaRF dparf;
 
- private:
-  ModelConfig config_;
-};
-TORCH_MODULE(TokenFields);
+ protected:
+  // The frame's tokens (TransHE over the painted body) and their DPaRF frames.
+  FrameTokens tokens(const FrameInputs& in, const PaintedBody& body);
 
-// Factory: the representation named by config.representation.
+ private:
+  TokenRecipe recipe_;
+  int64_t nk_;
+};
+
+// The same network with METHOD 9's exact shortcut: fc_0's token part applied to the tokens once
+// per frame (TokenTableStage), a weighted gather of Nk rows per point.
+class TokenTableImpl : public TokenFieldsImpl {
+ public:
+  using TokenFieldsImpl::TokenFieldsImpl;
+  HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
+};
+
+// Factory: the representation named by config.representation, in the form config.exact_shortcuts
+// asks for.
 std::shared_ptr<HumanRepresentation> make_human_representation(const ModelConfig& config);
 
 }  // namespace th::model

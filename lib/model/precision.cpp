@@ -96,26 +96,43 @@ std::string Products::describe() const {
   return onednn ? "fp32 (oneDNN products)" : "fp32 (BLAS products)";
 }
 
-Products resolve_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device,
-                          std::string* why, std::string* warning) {
-  if (precision != "fp32" && precision != "bf16" && precision != "auto")
-    fail("precision '", precision, "': expected fp32, bf16 or auto");
-  if (fp32_products != "auto" && fp32_products != "onednn" && fp32_products != "blas")
-    fail("fp32_products '", fp32_products, "': expected auto, onednn or blas");
+namespace {
+
+enum class Asked { fp32, bf16, automatic };
+enum class Backend { automatic, onednn, blas };
+
+template <class E>
+E parse(const std::string& what, const std::string& text, std::initializer_list<std::pair<const char*, E>> names,
+        const char* expected) {
+  for (const auto& [name, value] : names)
+    if (text == name) return value;
+  fail(what, " '", text, "': expected ", expected);
+}
+
+}  // namespace
+
+Products resolve_products(const std::string& precision_text, const std::string& fp32_products_text,
+                          const torch::Device& device, std::string* why, std::string* warning) {
+  const auto precision = parse<Asked>("precision", precision_text,
+                                      {{"fp32", Asked::fp32}, {"bf16", Asked::bf16}, {"auto", Asked::automatic}},
+                                      "fp32, bf16 or auto");
+  const auto backend = parse<Backend>("fp32_products", fp32_products_text,
+                                      {{"auto", Backend::automatic}, {"onednn", Backend::onednn}, {"blas", Backend::blas}},
+                                      "auto, onednn or blas");
   const bool cpu = device.is_cpu();
-  if (fp32_products == "onednn" && cpu && !at::hasMKLDNN())
+  if (backend == Backend::onednn && cpu && !at::hasMKLDNN())
     fail("fp32_products 'onednn': the linked LibTorch is built without oneDNN (use auto or blas)");
-  if (fp32_products == "onednn" && cpu && !onednn_products_agree())
+  if (backend == Backend::onednn && cpu && !onednn_products_agree())
     fail("fp32_products 'onednn': this LibTorch's oneDNN product (mkldnn_linear) disagrees with BLAS on a ",
          "probe product (use auto or blas)");
   Products p;
-  p.onednn = cpu && fp32_products != "blas" && at::hasMKLDNN() && onednn_products_agree();
-  const bool onednn_refused = cpu && fp32_products == "auto" && at::hasMKLDNN() && !p.onednn;
+  p.onednn = cpu && backend != Backend::blas && at::hasMKLDNN() && onednn_products_agree();
+  const bool onednn_refused = cpu && backend == Backend::automatic && at::hasMKLDNN() && !p.onednn;
   const auto bf16 = runtime::detect_cpu_bf16();
   std::string reason;
-  if (precision == "fp32") {
+  if (precision == Asked::fp32) {
     reason = "precision: fp32";
-  } else if (precision == "bf16") {
+  } else if (precision == Asked::bf16) {
     p.precision = Precision::bf16;
     reason = "precision: bf16";
     if (cpu && !bf16.native() && warning)

@@ -8,6 +8,7 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <functional>
 #include <utility>
 #include <vector>
 
@@ -44,6 +45,10 @@ Taps concat_taps(const std::vector<Taps>& taps);
 // accumulates touched rows only instead of materialising a full-size gradient per chunk.
 torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
                               const torch::Tensor& grad_sink = {});
+
+// What a stage of the per-frame state shows of its tensors: fn(tensor, its gradient-sink slot,
+// or null when it has none).
+using TensorVisitor = std::function<void(torch::Tensor& tensor, torch::Tensor* grad_sink)>;
 
 // (V, C, h, w) map -> (V * h * w, C) channels-last table for weighted_gather.
 torch::Tensor to_table(const torch::Tensor& map);

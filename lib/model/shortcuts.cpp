@@ -1,8 +1,10 @@
 #include "model/shortcuts.hpp"
 
+#include "geometry/camera.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/heads.hpp"
+#include "render/chunks.hpp"
 
 namespace th::model {
 
@@ -13,69 +15,47 @@ torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& 
   return table.permute({1, 0, 2}).reshape({table.size(1), -1});
 }
 
-FDIFolded fold_fdi(const FDIImpl& fdi) {
-  FDIFolded f;
-  const auto& W1 = fdi.fc_1->weight;
-  if (fdi.config.appearance) {
-    f.w0 = torch::cat({fdi.key0->weight, torch::mm(W1, fdi.value0->weight)}, 0);
-    f.b0 = torch::cat({fdi.key0->bias, torch::mv(W1, fdi.value0->bias)}, 0);
-  }
-  if (fdi.config.human) {
-    // fc_1's bias joins the query side (the attention weights multiply the value side).
-    const auto wv = torch::mm(W1, fdi.value1->weight);
-    const auto bv = torch::mv(W1, fdi.value1->bias) + fdi.fc_1->bias;
-    f.w1 = fdi.config.appearance ? torch::cat({fdi.key1->weight, wv}, 0) : wv;
-    f.b1 = fdi.config.appearance ? torch::cat({fdi.key1->bias, bv}, 0) : bv;
-  }
-  return f;
-}
-
-HeadsFolded fold_heads(const HeadsImpl& heads) {
-  HeadsFolded f;
-  const auto wc = heads.view_fc->weight.narrow(1, 0, 256);
-  f.e_weight = torch::mm(wc, heads.feature_fc->weight);
-  f.e_bias = torch::mv(wc, heads.feature_fc->bias) + heads.view_fc->bias;
-  if (heads.appearance()) {
-    f.readout_weight = torch::cat({torch::mm(wc, heads.rgb_res_0->weight), heads.rgb_res_1->weight}, 0);
-    f.readout_bias = torch::cat({torch::mv(wc, heads.rgb_res_0->bias), heads.rgb_res_1->bias}, 0);
-  }
-  return f;
-}
-
-FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads) { return {fold_fdi(fdi), fold_heads(heads)}; }
+FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads) { return {fdi.fold(), heads.fold()}; }
 
 namespace {
 
-// The window table of a readout, read from its level table, which is then dropped.
-void to_window(const PixelWindows& windows, const torch::Tensor& uv, const torch::Tensor& view,
-               const PixelGeometry& g, PixelReadout& r) {
+// The window form of a readout: its values at every window pixel, read from its level table.
+WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight, const torch::Tensor& bias,
+                        const PixelWindows& windows, const torch::Tensor& uv, const torch::Tensor& view,
+                        const PixelGeometry& g) {
   constexpr int64_t kChunk = 65536;  // window pixels per step: bounds the taps' memory
-  r.window_table = torch::empty({windows.rows(), r.table.size(1)}, r.table.options());
-  for (int64_t b = 0; b < windows.rows(); b += kChunk) {
-    const int64_t e = std::min(windows.rows(), b + kChunk);
+  WindowReadout w{torch::empty({windows.rows(), r.table.size(1)}, r.table.options()), weight, bias};
+  render::for_each_chunk(windows.rows(), kChunk, [&](int64_t b, int64_t e) {
     const auto u = uv.slice(0, b, e), v = view.slice(0, b, e);
-    r.window_table.slice(0, b, e).copy_(r.sample(g.stacked_level_taps(u, v), g.image_taps(u, v)));
-  }
-  r.table = torch::Tensor();
+    w.table.slice(0, b, e).copy_(r.sample(g.stacked_level_taps(u, v), g.image_taps(u, v)));
+  });
+  return w;
 }
 
 }  // namespace
 
-void make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                         const HeadsFolded& heads, PixelStage& pixels, const PixelWindows* windows) {
-  torch::Tensor uv, view;
-  if (windows) std::tie(uv, view) = windows->pixels(enc.images.options());
-  // One readout at a time, so that with windows a single level table exists at any moment.
-  pixels.alpha = encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias);
-  if (windows) to_window(*windows, uv, view, pixels.geometry, pixels.alpha);
-  pixels.color = encoder.make_readout(enc, heads.readout_weight, heads.readout_bias);
-  if (windows) to_window(*windows, uv, view, pixels.geometry, pixels.color);
-  pixels.color.image_table = pixels.alpha.image_table;  // one copy of the raw images
-  if (windows) {
-    pixels.windows = *windows;
-    pixels.levels = enc.levels;  // for points outside the windows
-    pixels.images = enc.images;
-  }
+PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                                  const HeadsFolded& heads) {
+  PixelReadouts px;
+  px.geometry = enc.geometry;
+  px.alpha = encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias);
+  px.color = encoder.make_readout(enc, heads.readout_weight, heads.readout_bias);
+  px.color.image_table = px.alpha.image_table;  // one copy of the raw images
+  return px;
+}
+
+WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                                    const HeadsFolded& heads, const PixelWindows& windows) {
+  WindowReadouts px;
+  const auto [uv, view] = windows.pixels(enc.images.options());
+  // One readout at a time, so that a single level table exists at any moment.
+  px.alpha = to_window(encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias),
+                       fdi.alpha_res_0->weight, fdi.alpha_res_0->bias, windows, uv, view, enc.geometry);
+  px.color = to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias), heads.readout_weight,
+                       heads.readout_bias, windows, uv, view, enc.geometry);
+  px.windows = windows;
+  px.levels.enc = enc;  // for points outside the windows
+  return px;
 }
 
 PixelWindows body_windows(const FrameGeometry& geo, const torch::Tensor& vertices, double distance,
@@ -88,7 +68,7 @@ PixelWindows body_windows(const FrameGeometry& geo, const torch::Tensor& vertice
   signs = torch::stack({grid[0].flatten(), grid[1].flatten(), grid[2].flatten()}, 1);  // (8, 3)
   const auto corners = (vertices.to(opts).unsqueeze(1) + distance * signs).reshape({-1, 3});
   const auto depth = (torch::matmul(corners.unsqueeze(0), geo.R.transpose(1, 2)) + geo.T.reshape({-1, 1, 3})).select(2, 2);
-  const auto uv = project_points(corners, geo.K, geo.R, geo.T);  // (V, 8 Nv, 2)
+  const auto uv = geometry::project_views(corners, geo.K, geo.R, geo.T);  // (V, 8 Nv, 2)
   PixelWindows w;
   int64_t offset = 0;
   for (int64_t v = 0; v < g.views; ++v) {

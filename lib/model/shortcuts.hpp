@@ -22,25 +22,26 @@ class HeadsImpl;
 // 1. Human stage. fc_0 is linear and DPaRF's Nk weights sum to 1, so fc_0's token part is
 // applied to the Nt tokens once per frame instead of to Nk tokens at every point:
 // table (Nt, V * 256) = fc_0_tokens(T_v(c)) + bias, view-major within a row. Read per point by
-// TokenFieldsImpl::forward (weighted_gather of the Nk rows, plus fc_0's coordinate part).
+// TokenTableImpl::forward (weighted_gather of the Nk rows, plus fc_0's coordinate part).
 // tokens: (V, Nt, C).
 torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& fc_0);
 
 // 2. Folded weights. FDI: fc_1 is folded into both value projections and each key projection
-// shares one product with its value projection (read by FDIImpl::forward_folded). Colour head:
-// view_fc's feature part is composed with feature_fc, and with rgb_res_0 into one 256-channel
-// readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v (read by HeadsImpl::color_folded).
-FDIFolded fold_fdi(const FDIImpl& fdi);
-HeadsFolded fold_heads(const HeadsImpl& heads);
+// shares one product with its value projection (FDIImpl::fold, for each fusion; read by
+// FDIImpl::forward_folded). Colour head: view_fc's feature part is composed with feature_fc, and
+// with rgb_res_0 into one 256-channel readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v
+// (HeadsImpl::fold; read by HeadsImpl::color_folded).
 FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads);
 
 // 3. Pixel stage. A linear layer that reads p_v commutes with bilinear upsampling and with
 // sampling, so FDI's alpha_res_0 and the colour head's folded readout are applied to each
-// ResNet level (and the raw-RGB channels to the image) once per frame: PixelStage::alpha and
+// ResNet level (and the raw-RGB channels to the image) once per frame: PixelReadouts::alpha and
 // ::color, read per point by PixelReadout::sample. p_v is never formed at full resolution.
-// With `windows` (4. below), the readouts take their window form.
-void make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                         const HeadsFolded& heads, PixelStage& pixels, const PixelWindows* windows = nullptr);
+PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                                  const HeadsFolded& heads);
+// The same in window form (4. below): each readout at every pixel of `windows`.
+WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                                    const HeadsFolded& heads, const PixelWindows& windows);
 
 // 4. Readout windows (inference on CPU). Progressive rendering evaluates only points within the
 // culling distance of a body vertex, and those project into a rectangle of each view: the

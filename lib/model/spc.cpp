@@ -12,7 +12,7 @@ SPCTrilinearImpl::SPCTrilinearImpl(const ModelConfig& config) : config_(config.s
   fc_0 = register_module("fc_0", torch::nn::Linear(C, 256));
 }
 
-void SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBody& body, HumanStage& stage) {
+HumanStage SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBody& body) {
   const auto& painted = body.features;
   const auto& xs_vertices = body.xs_vertices;
   const double voxel = config_.voxel_size;
@@ -37,12 +37,11 @@ void SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBody& bod
   auto grid = (sums / counts.clamp_min(1).view({1, -1, 1}))
                   .permute({0, 2, 1})
                   .reshape({V, C, nz, ny, nx});
-  stage.grid = conv->forward(grid);
-  stage.lo = lo;
-  stage.extent = (dims - 1).to(lo.dtype()) * voxel;
+  return SPCStage{conv->forward(grid), lo, (dims - 1).to(lo.dtype()) * voxel};
 }
 
-torch::Tensor SPCTrilinearImpl::forward(const HumanStage& stage, const torch::Tensor& xs, const Products&) {
+torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Tensor& xs, const Products&) {
+  const auto& stage = std::get<SPCStage>(human);
   const auto& grid = stage.grid;
   const auto V = grid.size(0), n = xs.size(0);
   // (x, y, z) -> [-1, 1] over the voxel centres (align_corners); outside the grid reads 0.

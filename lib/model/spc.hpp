@@ -13,7 +13,7 @@ class SPCTrilinearImpl : public HumanRepresentation {
  public:
   explicit SPCTrilinearImpl(const ModelConfig& config);
 
-  void prepare(const FrameInputs& in, const PaintedBody& body, HumanStage& stage) override;
+  HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
   torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
 
   torch::nn::Linear embed{nullptr}, fc_0{nullptr};

@@ -82,7 +82,19 @@ struct FrameTokens {
   torch::Tensor keep;       // (Nt) int64: the clusters that have a token
   TokenFrames frames;
 };
-FrameTokens build_tokens(TransHEImpl* vit, const ModelConfig& config, const FrameInputs& in,
+// How a frame's tokens are built, decided once from the config (token_recipe).
+struct TokenRecipe {
+  // The per-vertex weights of the cluster means: none (every vertex counts [parity]) or the
+  // visibility (grouping.mean_over: visible).
+  torch::Tensor (*weights)(const FrameInputs& in);
+  // The vertices whose cluster means are the token positions: the canonical body (v_template
+  // [parity]) or the posed body in the SMPL frame (transhe.position: observation).
+  const torch::Tensor& (*position_source)(const FrameInputs& in, const PaintedBody& body);
+  double pe_scale;
+};
+TokenRecipe token_recipe(const ModelConfig& config);
+
+FrameTokens build_tokens(TransHEImpl* vit, const TokenRecipe& recipe, const FrameInputs& in,
                          const PaintedBody& body);
 
 // timm's trunc_normal_(std, a=-2, b=2) by the inverse-CDF method.

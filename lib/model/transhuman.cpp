@@ -10,33 +10,16 @@
 #include "model/pretrained.hpp"
 #include "model/positional_encoding.hpp"
 #include "model/shortcuts.hpp"
+#include "geometry/camera.hpp"
 #include "render/body_distance.hpp"
+#include "render/chunks.hpp"
 
 namespace th::model {
-namespace {
 
-namespace F = torch::nn::functional;
 using render::ScopedTimer;
 
-// Rows (n, v) of points x views, n-major, and the view of each row.
-torch::Tensor view_ids(int64_t n, int64_t V, const torch::Device& device) {
-  return torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(device)).repeat({n});
-}
-
-// The encoder levels a pixel stage keeps (fast sampling, or the fallback of readout windows).
-EncodedViews levels_of(const PixelStage& px) {
-  EncodedViews enc;
-  enc.levels = px.levels;
-  enc.images = px.images;
-  enc.geometry = px.geometry;
-  return enc;
-}
-
-}  // namespace
-
-TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
-    : config_(config), cull_distance_(cull_distance) {
-  encoder = register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb));
+TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
+  encoder = register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb, config.transhe.dim));
   if (!config.encoder.pretrained.empty()) {
     load_pretrained_encoder(*encoder, config.encoder.pretrained);
     spdlog::info("encoder: ImageNet ResNet-18 weights from {}", config.encoder.pretrained);
@@ -46,9 +29,12 @@ TransHumanImpl::TransHumanImpl(const ModelConfig& config, double cull_distance)
   if (config.fdi.human) human = register_module("human", make_human_representation(config));
   fdi = register_module("fdi", FDI(config.fdi, encoder->pixel_channels()));
   heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));
+  pixels_ = make_pixel_form(config, encoder, fdi);
+  network_ = make_network_form(config, fdi, heads);
+  paint_ = paint_form(config);
 }
 
-FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
+FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) {
   in.check();
   FrameCache cache;
   const auto opts = in.ref_images.options();
@@ -58,7 +44,7 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
   geo.T = in.T.to(opts).reshape({-1, 3, 1});
   geo.Rh = in.Rh.to(opts);
   geo.Th = in.Th.to(opts).reshape({3});
-  geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance_);
+  if (cull_distance > 0) geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
 
   // Encoder (METHOD 3.1).
   EncodedViews enc;
@@ -70,8 +56,7 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
     }
     for (auto& level : enc.levels) level = Products::fp32(level);
   }
-  cache.pixels.geometry = enc.geometry;
-  if (config_.exact_shortcuts) cache.folded = fold_weights(*fdi, *heads);
+  cache.network = network_->prepare();
 
   // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.2, 3.3).
   if (human) {
@@ -79,117 +64,56 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in) {
     const auto vertices = in.vertices.to(opts);
     {
       ScopedTimer timer(profile_, "painting");
-      const auto uv = project_points(vertices, geo.K, geo.R, geo.T);
-      body.features = config_.encoder.fast_sampling ? encoder->paint(enc, uv, in.visibility)
-                                                    : encoder->paint_direct(enc, uv, in.visibility);
+      const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
+      body.features = ((*encoder).*paint_)(enc, uv, in.visibility);
     }
     ScopedTimer timer(profile_, "transhe");
     body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);
     {
       FrameAutocast autocast(products_, opts.device());
-      human->prepare(in, body, cache.human);
+      cache.human = human->prepare(in, body);
     }
-    auto& h = cache.human;
-    for (auto* t : {&h.tokens, &h.table, &h.grid, &h.frames.origins, &h.frames.rotations})
-      if (t->defined()) *t = Products::fp32(*t);
+    std::visit([](auto& stage) {
+      stage.visit([](torch::Tensor& t, torch::Tensor*) {
+        if (t.defined()) t = Products::fp32(t);
+      });
+    }, cache.human);
   }
 
   // What per-point sampling reads of the encoder output (the appearance branch of FDI and the
-  // colour head), in the form the config asks for.
+  // colour head), in the pixel form chosen at construction.
   ScopedTimer timer(profile_, "readouts");
-  if (config_.fdi.appearance) {
-    auto& px = cache.pixels;
-    if (config_.exact_shortcuts) {
-      // METHOD 9; on CPU without a gradient (inference) in the window form
-      if (config_.readout_windows && !torch::GradMode::is_enabled() && opts.device().is_cpu() && cull_distance_ > 0) {
-        const auto windows = body_windows(geo, in.vertices, cull_distance_, enc.geometry);
-        make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px, &windows);
-      } else {
-        make_pixel_readouts(*encoder, enc, *fdi, cache.folded.heads, px);
-      }
-    } else if (config_.encoder.fast_sampling) {
-      px.levels = enc.levels;
-      px.images = enc.images;
-    } else {
-      px.pixel = encoder->pixel_features(enc);  // (V, Cpix, H, W), the reference's tensor
-    }
-  }
+  cache.pixels = pixels_->prepare({enc, geo, in.vertices, cull_distance}, cache.network);
   return cache;
 }
 
-torch::Tensor TransHumanImpl::pixel_features_at(const PixelStage& px, const torch::Tensor& uv) {
-  ScopedTimer timer(profile_, "sampling");
-  if (px.pixel.defined()) return grid_sample_pixels(px.pixel, uv);
-  const auto n = uv.size(0), V = uv.size(1);
-  const auto flat = uv.reshape({-1, 2});
-  const auto view = view_ids(n, V, uv.device());
-  return encoder
-      ->sample_pixel_features(levels_of(px), px.geometry.stacked_level_taps(flat, view),
-                              px.geometry.image_taps(flat, view))
-      .view({n, V, -1});
-}
-
-torch::Tensor TransHumanImpl::readout_at(const PixelStage& px, const PixelReadout& readout,
-                                         const torch::Tensor& uv) {
-  ScopedTimer timer(profile_, "sampling");
-  const auto n = uv.size(0), V = uv.size(1);
-  const auto flat = uv.reshape({-1, 2});
-  const auto view = view_ids(n, V, uv.device());
-  if (readout.window_table.defined()) {  // METHOD 9 readout windows
-    const auto [taps, inside] = px.windows.taps(flat, view, px.geometry.height, px.geometry.width);
-    auto out = weighted_gather(readout.window_table, taps);
-    if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
-      const auto idx = (~inside).nonzero().flatten();
-      const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
-      const auto p = encoder->sample_pixel_features(levels_of(px), px.geometry.stacked_level_taps(f, v),
-                                                    px.geometry.image_taps(f, v));
-      out.index_copy_(0, idx, F::linear(p, readout.weight, readout.layer_bias));
-    }
-    return out.view({n, V, -1});
-  }
-  return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
-      .view({n, V, -1});
-}
-
-TransHumanImpl::PointFeatures TransHumanImpl::point_features(const FrameCache& cache,
-                                                             const torch::Tensor& pts) {
+TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
   const auto& geo = cache.geometry;
-  PointFeatures f;
+  torch::Tensor s, a, uv;  // FDI's inputs s_v, a_v (METHOD 3.3, 3.4) and the projections
   if (human) {
     ScopedTimer timer(profile_, "dparf");
-    const auto xs = torch::mm(pts - geo.Th, geo.Rh);
-    f.s = human->forward(cache.human, xs, products_);
+    s = human->forward(cache.human, torch::mm(pts - geo.Th, geo.Rh), products_);
   }
   {
     ScopedTimer timer(profile_, "sampling");
-    f.uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
+    uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
+    a = pixels_->appearance(cache.pixels, uv);
+    if (a.defined()) a.relu_();
   }
-  if (config_.fdi.appearance) {
-    f.a = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.alpha, f.uv)
-                                  : fdi->alpha_res_0(pixel_features_at(cache.pixels, f.uv));
-    f.a.relu_();
-  }
-  return f;
-}
-
-TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
-  const PointFeatures f = point_features(cache, pts);
   ScopedTimer timer(profile_, "fdi");
-  auto e = config_.exact_shortcuts ? fdi->forward_folded(cache.folded.fdi, f.s, f.a, products_)
-                                   : fdi->forward(f.s, f.a, products_);
-  return {std::move(e), f.uv};
+  return {network_->trunk(cache.network, s, a, products_), uv};
 }
 
 torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs) {
   torch::Tensor pix;  // p_v, or its folded readout (exact shortcuts)
-  if (config_.fdi.appearance)
-    pix = config_.exact_shortcuts ? readout_at(cache.pixels, cache.pixels.color, t.uv)
-                                  : pixel_features_at(cache.pixels, t.uv);
+  {
+    ScopedTimer timer(profile_, "sampling");
+    pix = pixels_->colour(cache.pixels, t.uv);
+  }
   ScopedTimer timer(profile_, "heads");
   const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
-  if (config_.exact_shortcuts) return heads->color_folded(cache.folded.heads, t.e, pix, code, products_);
-  return heads->color(t.e, pix, code, products_);
+  return network_->colour(cache.network, t.e, pix, code, products_);
 }
 
 torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tensor& pts,
@@ -275,15 +199,10 @@ struct ChunkJob : torch::CustomClassHolder {
 
 torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, const torch::Tensor& pts,
                              const torch::Tensor& dirs, int64_t chunk, bool density_first) {
-  const int64_t n = pts.size(0);
-  if (n <= chunk)
-    return density_first ? model.forward_density_first(cache, pts, dirs) : model.forward(cache, pts, dirs);
-  std::vector<torch::Tensor> parts;
-  for (int64_t b = 0; b < n; b += chunk) {
-    const auto p = pts.slice(0, b, std::min(n, b + chunk)), d = dirs.slice(0, b, std::min(n, b + chunk));
-    parts.push_back(density_first ? model.forward_density_first(cache, p, d) : model.forward(cache, p, d));
-  }
-  return torch::cat(parts);
+  return render::cat_chunks(pts.size(0), chunk, [&](int64_t b, int64_t e) {
+    const auto p = pts.slice(0, b, e), d = dirs.slice(0, b, e);
+    return density_first ? model.forward_density_first(cache, p, d) : model.forward(cache, p, d);
+  });
 }
 
 // Forward without a graph; backward recomputes chunk by chunk with leaf copies of the frame
@@ -302,14 +221,10 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     if (!job->keep_graph) return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
     torch::AutoGradMode enable(true);
     job->kept = std::make_unique<LeafFrame>(job->cache);
-    const int64_t n = pts.size(0);
-    std::vector<torch::Tensor> values;
-    for (int64_t b = 0; b < n; b += job->chunk) {
-      const int64_t e = std::min(n, b + job->chunk);
+    return render::cat_chunks(pts.size(0), job->chunk, [&](int64_t b, int64_t e) {
       job->outputs.push_back(job->model->forward_density_first(job->kept->cache, pts.slice(0, b, e), dirs.slice(0, b, e)));
-      values.push_back(job->outputs.back().detach());
-    }
-    return values.size() == 1 ? values.front() : torch::cat(values);
+      return job->outputs.back().detach();
+    });
   }
 
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
@@ -322,22 +237,21 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     const int64_t n = pts.size(0);
     torch::autograd::variable_list grads;
     if (job->keep_graph) {
-      TORCH_CHECK(job->kept && job->outputs.size() == size_t((n + job->chunk - 1) / job->chunk),
+      TORCH_CHECK(job->kept && job->outputs.size() == size_t(std::max<int64_t>(1, (n + job->chunk - 1) / job->chunk)),
                   "the kept per-point graphs were already used (a second backward pass)");
-      for (size_t i = 0; i < job->outputs.size(); ++i) {
-        const int64_t b = int64_t(i) * job->chunk;
-        torch::autograd::backward({job->outputs[i]}, {g.slice(0, b, std::min(n, b + job->chunk))});
-      }
+      size_t i = 0;
+      render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
+        torch::autograd::backward({job->outputs[i++]}, {g.slice(0, b, e)});
+      });
       grads = job->kept->grads();
       job->outputs.clear();
       job->kept.reset();
     } else {
       LeafFrame leaf(job->cache);
-      for (int64_t b = 0; b < n; b += job->chunk) {
-        const int64_t e = std::min(n, b + job->chunk);
+      render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
         const auto raw = job->model->forward_density_first(leaf.cache, pts.slice(0, b, e), dirs.slice(0, b, e));
         torch::autograd::backward({raw}, {g.slice(0, b, e)});
-      }
+      });
       grads = leaf.grads();
     }
     grads.emplace_back();  // pts
@@ -353,12 +267,6 @@ FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t c
                        int64_t keep_graph_points)
     : model_(model), cache_(cache), chunk_(chunk_points), checkpoint_(checkpoint),
       keep_graph_points_(keep_graph_points) {}
-
-int64_t keep_graph_points(const RenderConfig& config) {
-  if (config.train_recompute == "always") return 0;
-  if (config.train_recompute == "never") return std::numeric_limits<int64_t>::max();
-  return kKeepGraphPoints;
-}
 
 torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dirs) {
   if (!checkpoint_ || !torch::GradMode::is_enabled()) return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
@@ -379,25 +287,9 @@ torch::Tensor FrameField::raw_density_first(const torch::Tensor& pts, const torc
   return forward_chunks(model_, cache_, pts, dirs, chunk_, true);
 }
 
-render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCache& cache,
-                                          const render::Rays& rays, const RenderConfig& config,
-                                          bool skip_far_points, render::Profile* profile) {
-  FrameField field(model, cache, config.train_chunk_points, true, keep_graph_points(config));
-  return render::VolumeRenderer(config, profile)
-      .render(field, rays, true, skip_far_points ? cache.geometry.body.get() : nullptr);
-}
-
-render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
-                                 const RenderConfig& config, render::Profile* profile) {
-  torch::NoGradGuard no_grad;
-  FrameField field(model, cache, config.chunk_points, false);
-  if (config.progressive) return render::render_progressive(field, *cache.geometry.body, rays, config, profile);
-  return render::VolumeRenderer(config, profile).render(field, rays, false);
-}
-
 std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model) {
   std::vector<ParameterCount> out{{"encoder (ResNet-18 to layer2)", 0}, {"reduction + colour", 0}};
-  const bool spc = model.config().representation == "spc_trilinear";
+  const bool spc = model.config().representation == Representation::spc_trilinear;
   if (model.human) out.push_back({spc ? "SPC network" : "ViT", 0});
   out.push_back({"heads (fc_0, FDI, density, colour)", 0});
   auto find = [&](const std::string& name) -> int64_t& {

@@ -1,7 +1,8 @@
 #pragma once
 // The composed TransHuman network (METHOD 3): encoder -> painting -> human representation
 // (TransHE + DPaRF, or the SPC baseline) -> FDI -> heads. Per-frame work happens once in
-// prepare(); forward() evaluates points. The components are chosen by the ModelConfig.
+// prepare(); forward() evaluates points. The components and their forms are chosen by the
+// ModelConfig when the model is built.
 
 #include <torch/torch.h>
 
@@ -12,24 +13,27 @@
 #include "core/config.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
+#include "model/forms.hpp"
 #include "model/frame_cache.hpp"
 #include "model/heads.hpp"
 #include "model/human.hpp"
 #include "model/inputs.hpp"
 #include "model/precision.hpp"
-#include "render/progressive.hpp"
 #include "render/volume.hpp"
 
 namespace th::model {
 
 class TransHumanImpl : public torch::nn::Module {
  public:
-  explicit TransHumanImpl(const ModelConfig& config, double cull_distance = 0.1);
+  // Builds the modules and chooses each stage's form once (model/forms.hpp).
+  explicit TransHumanImpl(const ModelConfig& config);
 
   // The per-frame stages (model/frame_cache.hpp), in order: frame geometry and the body-distance
   // structure, encoder, folded weights (exact shortcuts), painting and the human
   // representation, the pixel stage. Under autograd the tensors keep their history (training).
-  FrameCache prepare(const FrameInputs& in);
+  // `cull_distance` is the renderer's culling distance (render.cull_distance; 0: none): the
+  // frame's body-distance structure and the readout windows follow it.
+  FrameCache prepare(const FrameInputs& in, double cull_distance);
 
   // pts: (N, 3) world, dirs: (N, 3) ray directions (any length) -> raw (N, 4): rgb logits,
   // sigma_raw. One chunk: the caller bounds N (see FrameField).
@@ -56,29 +60,21 @@ class TransHumanImpl : public torch::nn::Module {
   Heads heads{nullptr};
 
  private:
-  // Per chunk of points, FDI's inputs: the human representation s_v (DPaRF, or SPC) and the
-  // appearance a_v sampled at the points' projections uv (METHOD 3.3, 3.4).
-  struct PointFeatures {
-    torch::Tensor s, a;  // (N, V, 256) each; undefined when the branch is off (ablations)
-    torch::Tensor uv;    // (N, V, 2) projections into the reference views
-  };
-  PointFeatures point_features(const FrameCache& cache, const torch::Tensor& pts);
-  // FDI's output, the per-point trunk e_v, plus what the colour head needs.
+  // FDI's output, the per-point trunk e_v, plus the projections uv (N, V, 2) that the colour
+  // head samples again.
   struct Trunk {
-    torch::Tensor e, uv;  // e: (N, V, 256); uv: (N, V, 2)
+    torch::Tensor e, uv;
   };
   Trunk trunk(const FrameCache& cache, const torch::Tensor& pts);
   torch::Tensor color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs);
-  // p_v at projections uv (N, V, 2) -> (N, V, Cpix), from the pixel stage's reference or
-  // fast-sampling form.
-  torch::Tensor pixel_features_at(const PixelStage& pixels, const torch::Tensor& uv);
-  // A per-level readout (exact shortcuts) at uv -> (N, V, Cout).
-  torch::Tensor readout_at(const PixelStage& pixels, const PixelReadout& readout, const torch::Tensor& uv);
 
   ModelConfig config_;
-  double cull_distance_;
   Products products_;
   render::Profile* profile_ = nullptr;
+  // The forms chosen at construction.
+  std::shared_ptr<const PixelForm> pixels_;
+  std::shared_ptr<const NetworkForm> network_;
+  PaintFn paint_;
 };
 TORCH_MODULE(TransHuman);
 
@@ -110,21 +106,6 @@ class FrameField : public render::RadianceField {
 // render.train_recompute "auto": training field calls of up to this many points keep their
 // chunks' graphs (the demo's 16,384 samples per step; about 60 MiB of graph per 1,000 points).
 constexpr int64_t kKeepGraphPoints = 65536;
-// The keep_graph_points of FrameField for render.train_recompute (auto, always, never).
-int64_t keep_graph_points(const RenderConfig& config);
-
-// Rendering one prepared frame the way training and inference do it.
-// Training: stratified samples; every sample evaluated (or, with skip_far_points, those within
-// render.cull_distance of the body) in chunks of render.train_chunk_points, recomputed in the
-// backward pass; one field call for all rays so per-frame gradient buffers are made once.
-// rays: (R) rays of the target view -> rgb (R, 3) etc. with autograd history.
-render::RenderResult render_training_rays(TransHumanImpl& model, const FrameCache& cache,
-                                          const render::Rays& rays, const RenderConfig& config,
-                                          bool skip_far_points = false, render::Profile* profile = nullptr);
-// Inference: no stratification; progressive rendering (render.progressive) or every sample;
-// chunks of render.chunk_points; no autograd.
-render::RenderResult render_rays(TransHumanImpl& model, const FrameCache& cache, const render::Rays& rays,
-                                 const RenderConfig& config, render::Profile* profile = nullptr);
 
 // Active parameters per module (METHOD 3.4): encoder (ResNet-18 to layer2), reduction + colour,
 // ViT (or the SPC network), heads (fc_0, FDI and heads), and "total" last.

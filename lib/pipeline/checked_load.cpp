@@ -37,10 +37,10 @@ namespace {
 // The storages a pickle of a checkpoint names (persistent ids ('storage', type, key, location,
 // numel)) must be records of exactly numel elements: LibTorch's own reader trusts numel and
 // would read past a shorter record.
-void check_storage_records(const io::detail::ZipSource& source, const std::vector<io::detail::ZipEntry>& entries,
+void check_storage_records(const io::ZipSource& source, const std::vector<io::ZipEntry>& entries,
                            const std::string& name, const std::string& pickle) {
-  const io::detail::ZipEntry* pkl = nullptr;
-  std::map<std::string, const io::detail::ZipEntry*> records;
+  const io::ZipEntry* pkl = nullptr;
+  std::map<std::string, const io::ZipEntry*> records;
   const std::string prefix = pickle.substr(0, pickle.size() - std::string("data.pkl").size());
   for (const auto& e : entries) {
     if (e.name == pickle) pkl = &e;
@@ -81,7 +81,7 @@ void check_storage_records(const io::detail::ZipSource& source, const std::vecto
                         "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
                         "UntypedStorage"})
     ext.globals[std::string("torch.") + s] = nullptr;
-  io::parse_pickle(io::detail::read_member(source, *pkl, name), where, ext);
+  io::parse_pickle(io::read_member(source, *pkl, name), where, ext);
 }
 
 }  // namespace
@@ -92,8 +92,8 @@ void check_checkpoint_archive(const fs::path& path) {
   // Storage records are stored (torch.save and LibTorch align them for memory mapping); LibTorch
   // deflates only its small code/ entries. A compressed member is bounded before it is inflated.
   constexpr uint64_t kMaxInflated = uint64_t{64} << 20;
-  const io::detail::FileSource source(path);
-  const auto entries = io::detail::list_zip(source, path.string());
+  const io::FileSource source(path);
+  const auto entries = io::list_zip(source, path.string());
   for (const auto& entry : entries) {
     if (entry.method == 0) continue;
     const std::string where = path.string() + "/" + entry.name;

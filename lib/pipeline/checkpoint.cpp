@@ -6,7 +6,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checked_load.hpp"
 #include "pipeline/reference_import.hpp"
@@ -68,7 +68,7 @@ void save_checkpoint(const fs::path& path, model::TransHumanImpl& model, torch::
                      const CheckpointState& st) {
   torch::serialize::OutputArchive root;
   write_checkpoint(root, model, optim, st);
-  io::detail::write_file_atomic(path, archive_bytes(root, "checkpoint '" + path.string() + "'"));
+  io::write_file_atomic(path, archive_bytes(root, "checkpoint '" + path.string() + "'"));
 }
 
 CheckpointState load_checkpoint(const fs::path& path, model::TransHumanImpl& model,
@@ -137,7 +137,7 @@ void save_model_weights(const model::TransHumanImpl& model, const std::filesyste
   write_model_config(archive, model.config());
   for (const auto& p : model.named_parameters()) archive.write(p.key(), p.value());
   for (const auto& b : model.named_buffers()) archive.write(b.key(), b.value(), true);
-  io::detail::write_file_atomic(path, archive_bytes(archive, "model weights '" + path.string() + "'"));
+  io::write_file_atomic(path, archive_bytes(archive, "model weights '" + path.string() + "'"));
 }
 
 void load_model_weights(model::TransHumanImpl& model, const std::filesystem::path& path) {

@@ -3,9 +3,11 @@
 #include <torch/torch.h>
 
 #include <chrono>
+#include <limits>
 
 #include "core/error.hpp"
 #include "metrics/metrics.hpp"
+#include "render/progressive.hpp"
 
 namespace th::pipeline {
 
@@ -41,23 +43,51 @@ render::Rays sample_rays(const data::Sample& s, const torch::Device& device) {
   return {f(s.ray_o), f(s.ray_d), f(s.near), f(s.far)};
 }
 
-Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
-                       const model::FrameInputs& inputs, const render::Rays& rays, bool training,
-                       bool cull_in_training, render::Profile* profile) {
+model::FrameCache prepare_frame(model::TransHumanImpl& model, const model::FrameInputs& inputs,
+                                const RenderConfig& rc) {
+  return model.prepare(inputs, rc.cull_distance);
+}
+
+int64_t keep_graph_points(const RenderConfig& config) {
+  switch (config.train_recompute) {
+    case Recompute::always: return 0;
+    case Recompute::never: return std::numeric_limits<int64_t>::max();
+    case Recompute::automatic: break;
+  }
+  return model::kKeepGraphPoints;
+}
+
+render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache, const render::Rays& rays,
+                            const RenderConfig& rc, const RenderPass& pass, render::Profile* profile) {
+  const auto* body = cache.geometry.body.get();
+  if (pass.training) {
+    if (pass.skip_far_points && !body) fail("train.skip_far_points: the frame was prepared without a culling distance");
+    model::FrameField field(model, cache, rc.train_chunk_points, true, keep_graph_points(rc));
+    return render::VolumeRenderer(rc, profile).render(field, rays, true, pass.skip_far_points ? body : nullptr);
+  }
+  torch::NoGradGuard no_grad;
+  model::FrameField field(model, cache, rc.chunk_points, false);
+  if (!rc.progressive) return render::VolumeRenderer(rc, profile).render(field, rays, false);
+  if (!body) fail("progressive rendering: the frame was prepared without a culling distance");
+  return render::render_progressive(field, *body, rays, rc, profile);
+}
+
+Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc, const model::FrameInputs& inputs,
+                       const render::Rays& rays, const RenderPass& pass, render::Profile* profile) {
   Rendered out;
-  out.cache = model.prepare(inputs);
-  out.result = training ? model::render_training_rays(model, out.cache, rays, rc, cull_in_training, profile)
-                        : model::render_rays(model, out.cache, rays, rc, profile);
+  out.cache = prepare_frame(model, inputs, rc);
+  out.result = render(model, out.cache, rays, rc, pass, profile);
   return out;
 }
 
-const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs) {
+const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs,
+                                             const RenderConfig& rc) {
   if (valid_ && model::same_inputs(inputs_, inputs)) {
     ++reused_;
     return cache_;
   }
   valid_ = false;
-  cache_ = model.prepare(inputs);
+  cache_ = prepare_frame(model, inputs, rc);
   inputs_ = inputs;
   valid_ = true;
   ++prepared_;
@@ -70,8 +100,8 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   torch::NoGradGuard no_grad;
   const auto t0 = std::chrono::steady_clock::now();
   const auto rays = sample_rays(sample, device);
-  const auto result = frames ? model::render_rays(model, frames->prepare(model, inputs), rays, rc)
-                             : render_sample(model, rc, inputs, rays, false, false).result;
+  const auto result = frames ? render(model, frames->prepare(model, inputs, rc), rays, rc, kInference)
+                             : render_sample(model, rc, inputs, rays, kInference).result;
   ViewResult r;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.stats = result.stats;

@@ -37,24 +37,48 @@ model::FrameInputs frame_inputs(const data::Sample& sample, const torch::Tensor&
 // The sample's rays for the renderer, on `device`.
 render::Rays sample_rays(const data::Sample& sample, const torch::Device& device);
 
-// Prepares the frame and renders the sample's rays: the one place where training and inference
-// rendering part (model::render_training_rays / model::render_rays say how). Training:
-// stratified samples, autograd on, every sample evaluated (culled when train.skip_far_points).
-// Inference: no grad, progressive when render.progressive, full rendering otherwise.
+// Rendering policy, in one place: how a prepared frame's rays are rendered.
+// Training: stratified samples, autograd on, the network in checkpointed chunks of
+// render.train_chunk_points (render.train_recompute says which chunks keep their graphs), every
+// sample evaluated, or with skip_far_points (train.skip_far_points) those within
+// render.cull_distance of the body. Inference: no autograd, chunks of render.chunk_points,
+// progressive rendering (culling, early ray termination) when render.progressive, every sample
+// otherwise.
+struct RenderPass {
+  bool training = false;
+  bool skip_far_points = false;  // training only
+};
+inline constexpr RenderPass kInference{false, false};
+
+// The frame prepared for rendering with `render_config`: its culling distance (the body-distance
+// structure, and readout windows at inference on CPU) is render.cull_distance.
+model::FrameCache prepare_frame(model::TransHumanImpl& model, const model::FrameInputs& inputs,
+                                const RenderConfig& render_config);
+
+// The one render dispatcher: training, evaluation, sessions and benchmarks render through it.
+render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache, const render::Rays& rays,
+                            const RenderConfig& render_config, const RenderPass& pass,
+                            render::Profile* profile = nullptr);
+
+// The keep_graph_points of model::FrameField for render.train_recompute (auto, always, never).
+int64_t keep_graph_points(const RenderConfig& config);
+
+// prepare_frame + render.
 struct Rendered {
   render::RenderResult result;
   model::FrameCache cache;
 };
 Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& render_config,
-                       const model::FrameInputs& inputs, const render::Rays& rays, bool training,
-                       bool cull_in_training, render::Profile* profile = nullptr);
+                       const model::FrameInputs& inputs, const render::Rays& rays, const RenderPass& pass,
+                       render::Profile* profile = nullptr);
 
 // The last prepared frame, handed out again while the frame inputs stay the same value for value
 // (several target views of one frame): the per-frame stages depend only on the inputs, so the
 // views render exactly as if each prepared its own.
 class FrameReuse {
  public:
-  const model::FrameCache& prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs);
+  const model::FrameCache& prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs,
+                                   const RenderConfig& render_config);
   int64_t prepared() const { return prepared_; }
   int64_t reused() const { return reused_; }
 

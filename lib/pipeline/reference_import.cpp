@@ -8,7 +8,7 @@
 #include <unordered_map>
 
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "io/pickle.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checked_load.hpp"
@@ -162,9 +162,9 @@ std::string reference_name(const std::string& name) {
 
 ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source) {
-  if (model.config().representation != "transhuman")
+  if (model.config().representation != Representation::transhuman)
     fail(source, ": reference checkpoints hold the TransHuman representation, not '",
-         model.config().representation, "'");
+         config::name_of(model.config().representation), "'");
   // Check everything first, then copy.
   std::vector<std::pair<torch::Tensor, torch::Tensor>> copies;
   ImportReport report;

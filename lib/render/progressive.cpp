@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "render/chunks.hpp"
 #include "render/segments.hpp"
 
 namespace th::render {
@@ -35,8 +36,8 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
   out.rgb = torch::zeros({R, 3}, rays.origins.options());
   out.depth = torch::zeros({R}, rays.origins.options());
   out.acc = torch::zeros({R}, rays.origins.options());
-  for (int64_t b = 0; b < R; b += batch) {
-    const auto r = rays.slice(b, std::min(R, b + batch));
+  for_each_chunk(R, batch, [&](int64_t b, int64_t e) {
+    const auto r = rays.slice(b, e);
     const int64_t n = r.size();
     torch::Tensor z, pts, keep;
     {
@@ -52,18 +53,18 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
     out.stats.culled_points += n * S - kept;
     if (kept == 0) {
       out.stats.empty_rays += n;
-      continue;
+      return;
     }
     auto raw = torch::zeros({n * S, 4}, pts.options());
     // Evaluates the samples `idx` (flat indices into the batch's n x S samples) in chunks.
     auto evaluate = [&](const torch::Tensor& idx) {
-      for (int64_t c = 0; c < idx.size(0); c += chunk) {
-        const auto part = idx.slice(0, c, std::min(idx.size(0), c + chunk));
+      for_each_chunk(idx.size(0), chunk, [&](int64_t c0, int64_t c1) {
+        const auto part = idx.slice(0, c0, c1);
         const auto dirs = r.directions.index_select(0, torch::div(part, S, "floor"));
         const auto values = field.raw_density_first(pts.index_select(0, part), dirs);
         raw.index_copy_(0, part, values);
         out.stats.color_points += (values.select(1, 3) > 0).sum().item<int64_t>();
-      }
+      });
       out.stats.density_points += idx.size(0);
     };
     const auto ray_kept = keep.sum(1);
@@ -99,7 +100,7 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
     out.rgb.slice(0, b, b + n).copy_(comp.rgb);
     out.depth.slice(0, b, b + n).copy_(comp.depth);
     out.acc.slice(0, b, b + n).copy_(comp.acc);
-  }
+  });
   // Kept samples not evaluated: those the march skipped.
   out.stats.terminated_points = out.stats.points - out.stats.culled_points - out.stats.density_points;
   return out;

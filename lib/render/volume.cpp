@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "render/body_distance.hpp"
+#include "render/chunks.hpp"
 #include "render/segments.hpp"
 
 namespace th::render {
@@ -64,7 +65,7 @@ VolumeRenderer::VolumeRenderer(const RenderConfig& config, Profile* profile)
     : config_(config), profile_(profile) {}
 
 RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool stratified,
-                                    const BodyDistance* cull) const {
+                                    const BodyDistance* skip_far_from) const {
   const int64_t S = config_.samples, R = rays.size();
   // Without autograd, ray batches of chunk_points samples bound the memory. With autograd the
   // field bounds it (FrameField recomputes its chunks in the backward pass) and one call for all
@@ -75,8 +76,8 @@ RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool
   RenderResult out;
   out.stats.rays = R;
   out.stats.points = R * S;
-  for (int64_t b = 0; b < R; b += batch) {
-    const auto r = rays.slice(b, std::min(R, b + batch));
+  for_each_chunk(R, batch, [&](int64_t b, int64_t e) {
+    const auto r = rays.slice(b, e);
     torch::Tensor z, pts, dirs;
     {
       ScopedTimer t(profile_, "sampling");
@@ -85,11 +86,11 @@ RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool
       dirs = r.directions.unsqueeze(1).expand({r.size(), S, 3}).reshape({-1, 3});
     }
     torch::Tensor raw;
-    if (cull) {
+    if (skip_far_from) {
       torch::Tensor keep;
       {
         ScopedTimer t(profile_, "culling");
-        keep = cull->near(pts).nonzero().flatten();
+        keep = skip_far_from->near(pts).nonzero().flatten();
       }
       out.stats.culled_points += pts.size(0) - keep.size(0);
       const auto kept = field.raw(pts.index_select(0, keep), dirs.index_select(0, keep));
@@ -106,7 +107,7 @@ RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool
     rgb.push_back(c.rgb);
     depth.push_back(c.depth);
     acc.push_back(c.acc);
-  }
+  });
   if (R == 0) {
     out.rgb = torch::zeros({0, 3}, rays.origins.options());
     out.depth = out.acc = torch::zeros({0}, rays.origins.options());

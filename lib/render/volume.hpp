@@ -104,15 +104,15 @@ struct RenderResult {
 
 // Renders every sample of every ray (training, and full rendering at inference). Without
 // autograd the field is called on batches of at most config.chunk_points points; under autograd
-// once for all rays (the field chunks internally, see model::FrameField). With `cull` (training with
-// train.skip_far_points), samples farther than the culling distance from the body are skipped
-// (raw = 0), as at inference.
+// once for all rays (the field chunks internally, see model::FrameField). With `skip_far_from`
+// (training with train.skip_far_points), samples farther than the culling distance from that
+// body are skipped (raw = 0), as at inference.
 class VolumeRenderer {
  public:
   explicit VolumeRenderer(const RenderConfig& config, Profile* profile = nullptr);
 
   RenderResult render(RadianceField& field, const Rays& rays, bool stratified,
-                      const BodyDistance* cull = nullptr) const;
+                      const BodyDistance* skip_far_from = nullptr) const;
 
   const RenderConfig& config() const { return config_; }
 

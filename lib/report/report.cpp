@@ -16,7 +16,7 @@
 #include "core/error.hpp"
 #include "core/files.hpp"
 #include "eval/evaluator.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 
 namespace th::report {
 namespace fs = std::filesystem;
@@ -97,7 +97,7 @@ std::string read_summary(const fs::path& eval) {
 }
 
 // Whole or not at all (a full disk leaves the previous file, and the error names this one).
-void write_text(const fs::path& path, const std::string& text) { io::detail::write_file_atomic(path, text); }
+void write_text(const fs::path& path, const std::string& text) { io::write_file_atomic(path, text); }
 
 std::string base64(const std::string& bytes) {
   static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";

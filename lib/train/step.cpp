@@ -33,8 +33,8 @@ StepStats accumulate_step(const StepContext& c, data::Prefetcher& loader, const 
     c.model.train();
     const auto inputs = pipeline::frame_inputs(sample, c.canonical, c.tokens.labels(sample.body), c.device);
     const auto rays = pipeline::sample_rays(sample, c.device);
-    const auto rendered = pipeline::render_sample(c.model, c.config.render, inputs, rays, /*training=*/true,
-                                                  c.config.train.skip_far_points);
+    const auto rendered = pipeline::render_sample(c.model, c.config.render, inputs, rays,
+                                                  {/*training=*/true, c.config.train.skip_far_points});
     const auto& rgb = rendered.result.rgb;
     const auto loss = patch_loss(rgb, sample.ray_patch_index, sample.patch_rgb, c.lpips, c.config.train.lpips_weight);
     const double loss_value = loss.total.item<double>();

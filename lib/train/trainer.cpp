@@ -17,7 +17,7 @@
 #include "data/dataset.hpp"
 #include "data/sampler.hpp"
 #include "dist/communicator.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "metrics/lpips.hpp"
 #include "model/encoder.hpp"
 #include "pipeline/checkpoint.hpp"
@@ -39,7 +39,7 @@ namespace {
 void drop_rows_after(const fs::path& file, int64_t step) {
   std::error_code ec;
   if (!fs::exists(file, ec)) return;
-  std::istringstream in(io::detail::read_file(file));
+  std::istringstream in(io::read_file(file));
   std::string kept, line;
   int64_t dropped = 0;
   while (std::getline(in, line)) {
@@ -52,7 +52,7 @@ void drop_rows_after(const fs::path& file, int64_t step) {
     kept += line + "\n";
   }
   if (dropped == 0) return;
-  io::detail::write_file_atomic(file, kept);
+  io::write_file_atomic(file, kept);
   spdlog::info("resume: dropped {} row(s) of {} logged after step {}, the checkpoint's", dropped,
                file.filename().string(), step);
 }
@@ -171,7 +171,7 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
                                                      data::Dataset::Mode::Test, smpl);
 
   torch::manual_seed(uint64_t(config.seed));
-  model_ = model::TransHuman(config.model, config.render.cull_distance);
+  model_ = model::TransHuman(config.model);
   // The constructor loads model.encoder.pretrained (and logs either way).
   model_->to(device);
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));

@@ -10,7 +10,7 @@
 #include "core/error.hpp"
 #include "core/files.hpp"
 #include "geometry/camera.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 
 namespace th::video {
 namespace {
@@ -207,7 +207,7 @@ void write_camera_path(const std::filesystem::path& path, const CameraPath& came
   std::string text = "# x_cam = R x_world + T (METHOD 2.2); T in metres; one camera per frame\n";
   text += emitter.c_str();
   text += "\n";
-  io::detail::write_file_atomic(path, text);
+  io::write_file_atomic(path, text);
 }
 
 CameraPath single_camera(const std::vector<PathCamera>& cameras, int index,

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 
 namespace th::video {
 namespace {
@@ -55,7 +55,7 @@ std::string encode_png(const cv::Mat& image, const std::string& what) {
 }
 
 void write_png(const std::filesystem::path& path, const cv::Mat& image) {
-  io::detail::write_file_atomic(path, encode_png(image, "'" + path.string() + "'"));
+  io::write_file_atomic(path, encode_png(image, "'" + path.string() + "'"));
 }
 
 FrameWriter::FrameWriter(FrameWriterOptions options) : options_(std::move(options)) {

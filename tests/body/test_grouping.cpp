@@ -87,7 +87,7 @@ TEST_CASE("the grouping kind of the config selects the implementation", "[groupi
   auto km = make_grouping(c);
   CHECK(km->is_static());
   CHECK(km->labels(pts, pts).max().item<int64_t>() == 29);
-  c.kind = "observation_grid";
+  c.kind = th::GroupingKind::observation_grid;
   auto obs = make_grouping(c);
   CHECK_FALSE(obs->is_static());
   // Observation-space labels follow the posed points: a stretched pose groups differently.

@@ -42,7 +42,7 @@ void write_annots(const fs::path& root, const std::string& name, int frames, int
 }
 
 size_t samples(const fs::path& root, const std::string& split, const std::string& setting,
-               const std::string& dataset = "zju_mocap") {
+               th::DatasetKind dataset = th::DatasetKind::zju_mocap) {
   th::DataConfig c;
   c.root = root.string();
   c.dataset = dataset;
@@ -75,16 +75,16 @@ TEST_CASE("the H36M cross-dataset split has 54 target images", "[split]") {
   for (const auto& [name, frames] : std::vector<std::pair<std::string, int>>{
            {"S1", 750}, {"S5", 1250}, {"S6", 750}, {"S7", 1500}, {"S8", 1250}, {"S9", 1300}, {"S11", 1000}})
     write_annots(root / name, "Posing", frames, 4);  // Animatable NeRF's <S>/Posing layout
-  CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset", "h36m") == 54);
+  CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset", th::DatasetKind::h36m) == 54);
   // data.dataset names the layout: the H36M folders read as ZJU-MoCap fail naming the key.
-  CHECK_THROWS_WITH(samples(root, "data_splits/h36m.yaml", "cross_dataset", "zju_mocap"),
+  CHECK_THROWS_WITH(samples(root, "data_splits/h36m.yaml", "cross_dataset", th::DatasetKind::zju_mocap),
                     Catch::Contains((root / "S1" / "annots.npy").string()) && Catch::Contains("data.dataset: h36m"));
 }
 
 TEST_CASE("ZJU-MoCap folders read as H36M fail naming data.dataset", "[split]") {
   const fs::path root = th::test::scratch_dir("zju_as_h36m");
   write_annots(root, "CoreView_387", 30, 23);
-  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity", "h36m"),
+  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity", th::DatasetKind::h36m),
                     Catch::Contains((root / "CoreView_387" / "Posing" / "annots.npy").string()) &&
                         Catch::Contains("data.dataset: zju_mocap"));
 }

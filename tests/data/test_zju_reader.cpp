@@ -241,7 +241,7 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
 
   // Files for every view of every person: the dataset reads them as they are.
   auto c = tiny_config(root);
-  c.visibility = "files";
+  c.visibility = th::VisibilitySource::files;
   c.visibility_root = vis_root.string();
   const auto smpl = load_body_model(c);
   const int64_t nv = smpl->num_vertices();
@@ -268,7 +268,7 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
   const fs::path missing = visibility_file(vis_root, *human, s.frame, s.reference_views[1]);
   fs::remove(missing);
   CHECK_THROWS_WITH(ds.load(0, 0), Catch::Contains(missing.string()) && Catch::Contains("missing"));
-  c.visibility_missing = "all_visible";
+  c.visibility_missing = th::MissingVisibility::all_visible;
   const Sample lenient = Dataset(c, "identity", Dataset::Mode::Test, smpl).load(0, 0);
   CHECK(lenient.visibility[1].all().item<bool>());
   CHECK(torch::equal(lenient.visibility[0], s.visibility[0]));

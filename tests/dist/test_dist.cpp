@@ -62,7 +62,7 @@ struct State {
 };
 
 State state_of(const fs::path& checkpoint, const th::Config& c) {
-  th::model::TransHuman model(c.model, c.render.cull_distance);
+  th::model::TransHuman model(c.model);
   th::pipeline::load_weights(*model, checkpoint);
   State s;
   for (const auto& p : model->named_parameters()) s.params[p.key()] = p.value().clone();
@@ -227,7 +227,7 @@ TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulatin
   // Control: training changed the weights well beyond that tolerance, and one process on its
   // own samples ends elsewhere (so the comparison above can fail).
   torch::manual_seed(uint64_t(c.seed));
-  th::model::TransHuman fresh(c.model, c.render.cull_distance);
+  th::model::TransHuman fresh(c.model);
   std::map<std::string, torch::Tensor> initial;
   for (const auto& p : fresh->named_parameters()) initial[p.key()] = p.value();
   CHECK(max_difference(r0.params, initial) > 1e-3);

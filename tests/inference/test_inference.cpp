@@ -66,7 +66,7 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   const auto image = session.render(prepared, camera, int(s.target_image.size(1)), int(s.target_image.size(0)));
 
   // transhuman-eval's path: the same sample through evaluate_view.
-  th::model::TransHuman model(config.model, config.render.cull_distance);
+  th::model::TransHuman model(config.model);
   th::pipeline::load_weights(*model, tiny_checkpoint());
   model->eval();
   model->set_products(th::model::resolve_products(config.precision, config.fp32_products, torch::kCPU));

@@ -121,7 +121,7 @@ inline render::Rays target_rays(const SyntheticFrame& f, int64_t s) {
 template <class Model>
 void center_density(Model& model, const SyntheticFrame& f, double gain = 1.0) {
   torch::NoGradGuard no_grad;
-  const auto cache = model.prepare(f.inputs);
+  const auto cache = model.prepare(f.inputs, 0.1);
   const auto& v = f.inputs.vertices;
   const auto pts = v + 0.03 * torch::randn(v.sizes(), v.options());
   const auto raw = model.forward(cache, pts, torch::randn(v.sizes(), v.options()));

@@ -5,6 +5,7 @@
 #include "core/error.hpp"
 #include "model/frame_fixture.hpp"
 #include "model/transhuman.hpp"
+#include "pipeline/pipeline.hpp"
 #include "render/progressive.hpp"
 
 using namespace th;
@@ -49,9 +50,9 @@ void train_step_and_render(const Ablation& ab) {
   for (const auto& p : before) snapshot.push_back(p.detach().clone());
   // One training step (stratified samples, MSE).
   {
-    const auto cache = model->prepare(frame.inputs);
+    const auto cache = model->prepare(frame.inputs, rc.cull_distance);
     const auto rays = test::target_rays(frame, 10);
-    const auto out = render_training_rays(*model, cache, rays, rc, ab.skip_far_points);
+    const auto out = pipeline::render(*model, cache, rays, rc, {true, ab.skip_far_points});
     const auto loss = (out.rgb - 0.5).pow(2).mean();
     adam.zero_grad();
     loss.backward();
@@ -64,9 +65,9 @@ void train_step_and_render(const Ablation& ab) {
   // One image (progressive rendering).
   model->eval();
   torch::NoGradGuard ng;
-  const auto cache = model->prepare(frame.inputs);
+  const auto cache = model->prepare(frame.inputs, rc.cull_distance);
   const auto rays = test::target_rays(frame, 16);
-  const auto img = render_rays(*model, cache, rays, rc);
+  const auto img = pipeline::render(*model, cache, rays, rc, pipeline::kInference);
   CHECK(img.rgb.size(0) == rays.size());
   CHECK(torch::isfinite(img.rgb).all().item<bool>());
   CHECK(img.stats.density_points > 0);
@@ -78,29 +79,29 @@ TEST_CASE("every ablation builds, trains one step and renders one image", "[mode
   std::vector<Ablation> ablations = {
       {"default", [](ModelConfig&, RenderConfig&) {}},
       {"observation-space grouping and PE",
-       [](ModelConfig& c, RenderConfig&) { c.grouping.kind = "observation_grid", c.transhe.position = "observation"; },
+       [](ModelConfig& c, RenderConfig&) { c.grouping.kind = GroupingKind::observation_grid, c.transhe.position = TokenPosition::observation; },
        [](FrameInputs& in) { in.labels = grid_labels(in.vertices, 0.12); in.num_tokens = in.labels.max().item<int64_t>() + 1; }},
-      {"observation PE only", [](ModelConfig& c, RenderConfig&) { c.transhe.position = "observation"; }},
+      {"observation PE only", [](ModelConfig& c, RenderConfig&) { c.transhe.position = TokenPosition::observation; }},
       {"canonical grid",
-       [](ModelConfig& c, RenderConfig&) { c.grouping.kind = "canonical_grid"; },
+       [](ModelConfig& c, RenderConfig&) { c.grouping.kind = GroupingKind::canonical_grid; },
        [](FrameInputs& in) { in.labels = grid_labels(in.canonical, 0.12); in.num_tokens = in.labels.max().item<int64_t>() + 1; }},
       {"Nt 100", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 100},
       {"Nt 300", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 300},
       {"Nt 500", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 500},
       {"Nt 1000", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 1000},
       {"w/o transformer", [](ModelConfig& c, RenderConfig&) { c.transhe.enabled = false; }},
-      {"coordinate none", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = "none"; }},
-      {"coordinate absolute", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = "absolute"; }},
+      {"coordinate none", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::none; }},
+      {"coordinate absolute", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::absolute; }},
       {"FDI w/o a", [](ModelConfig& c, RenderConfig&) { c.fdi.appearance = false; }},
       {"FDI w/o h", [](ModelConfig& c, RenderConfig&) { c.fdi.human = false; }},
       {"FDI w/o RGB", [](ModelConfig& c, RenderConfig&) { c.fdi.raw_rgb = false; }},
       {"SPC + trilinear",
-       [](ModelConfig& c, RenderConfig&) { c.representation = "spc_trilinear", c.spc.voxel_size = 0.05, c.spc.channels = 16; }},
+       [](ModelConfig& c, RenderConfig&) { c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.05, c.spc.channels = 16; }},
       {"16 samples", [](ModelConfig&, RenderConfig& r) { r.samples = 16; }},
       {"training skips far points, full (non-progressive) inference",
        [](ModelConfig&, RenderConfig& r) { r.progressive = false, r.train_chunk_points = 256; }, nullptr, 300, 24, true},
       {"fused PE rounding, running BatchNorm statistics",
-       [](ModelConfig& c, RenderConfig&) { c.transhe.pe_rounding = "fused", c.encoder.batchnorm = "running"; }},
+       [](ModelConfig& c, RenderConfig&) { c.transhe.pe_rounding = PeRounding::fused, c.encoder.batchnorm = BatchNormStats::running; }},
       {"direct computation (no shortcuts)",
        [](ModelConfig& c, RenderConfig&) { c.exact_shortcuts = false, c.encoder.fast_sampling = false; }},
   };
@@ -125,9 +126,9 @@ TEST_CASE("configurations combining incompatible switches are refused with a rea
   CHECK_THAT(refused([](ModelConfig& c) { c.fdi.appearance = false, c.fdi.human = false; }),
              Catch::Contains("config key 'model.fdi' = {appearance: false, human: false}: at least one of the two "
                              "branches must stay on"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.representation = "spc_trilinear", c.fdi.human = false; }),
+  CHECK_THAT(refused([](ModelConfig& c) { c.representation = Representation::spc_trilinear, c.fdi.human = false; }),
              Catch::Contains("config key 'model.fdi.human' = false: the SPC + trilinear baseline"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = "observation_grid"; }), 
+  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = GroupingKind::observation_grid; }), 
              Catch::Contains("config key 'model.transhe.position' = canonical: observation-space grouping"));
   CHECK_THAT(refused([](ModelConfig& c) { c.dparf.nk = 0; }), 
              Catch::Contains("config key 'model.dparf.nk' = 0: must be between 1 and grouping.num_tokens"));
@@ -140,5 +141,5 @@ TEST_CASE("a frame with fewer non-empty tokens than Nk is refused naming the set
   auto frame = test::synthetic_frame(300, 24);
   frame.inputs.labels = frame.inputs.labels.remainder(5);  // 5 non-empty clusters out of 24
   TransHuman model(cfg);
-  CHECK_THROWS_WITH(model->prepare(frame.inputs), Catch::Contains("model.dparf.nk"));
+  CHECK_THROWS_WITH(model->prepare(frame.inputs, 0.1), Catch::Contains("model.dparf.nk"));
 }

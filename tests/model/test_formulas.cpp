@@ -90,7 +90,7 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   CHECK(max_abs(att, ref.at("attention")) < 1e-6);
   CHECK(torch::allclose(att.sum(2), torch::ones({n, V})));  // normalised over the key views
   CHECK(max_abs(fdi->forward(s, a), ref.at("e")) < 1e-4);
-  CHECK(max_abs(fdi->forward_folded(fold_fdi(*fdi), s, a), ref.at("e")) < 1e-4);
+  CHECK(max_abs(fdi->forward_folded(fdi->fold(), s, a), ref.at("e")) < 1e-4);
 }
 
 TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black background", "[render][formulas]") {
@@ -129,7 +129,7 @@ TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black back
 TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvision's", "[model][formulas]") {
   torch::manual_seed(4);
   EncoderConfig cfg;
-  Encoder enc(cfg, true);
+  Encoder enc(cfg, true, 192);
   enc->eval();  // batch statistics at inference [parity]
   const auto images = torch::rand({3, 3, 32, 40});
   test::PythonReference py("formulas_encoder");

@@ -7,6 +7,7 @@
 
 #include "model/frame_fixture.hpp"
 #include "model/transhuman.hpp"
+#include "pipeline/pipeline.hpp"
 #include "render/volume.hpp"
 
 using namespace th;
@@ -27,7 +28,7 @@ torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& fra
   RenderConfig rc;
   rc.samples = samples;
   rc.chunk_points = chunk;
-  const auto cache = model.prepare(frame.inputs);
+  const auto cache = model.prepare(frame.inputs, rc.cull_distance);
   FrameField field(model, cache, chunk, checkpoint, keep_graph_points);
   render::VolumeRenderer renderer(rc);
   const auto rays = test::target_rays(frame, rays_side);
@@ -122,9 +123,10 @@ TEST_CASE("train_recompute auto recomputes a field call above its threshold, wit
   REQUIRE(rays * samples > kKeepGraphPoints);
   RenderConfig rc;
   auto grads = [&](const char* mode) {
-    rc.train_recompute = mode;
+    rc.train_recompute = std::string(mode) == "never" ? Recompute::never
+                         : std::string(mode) == "always" ? Recompute::always : Recompute::automatic;
     model->zero_grad();
-    render_loss(*model, frame, side, samples, true, chunk, keep_graph_points(rc)).backward();
+    render_loss(*model, frame, side, samples, true, chunk, pipeline::keep_graph_points(rc)).backward();
     std::map<std::string, torch::Tensor> g;
     for (const auto& p : model->named_parameters()) g[p.key()] = p.value().grad().clone();
     return g;
@@ -132,7 +134,7 @@ TEST_CASE("train_recompute auto recomputes a field call above its threshold, wit
   // "never" keeps the forward pass's graphs: the reference for the recomputed chunks of
   // "always" and, above the threshold, of "auto".
   const auto never = grads("never"), always = grads("always"), automatic = grads("auto");
-  CHECK(keep_graph_points(rc) == kKeepGraphPoints);
+  CHECK(pipeline::keep_graph_points(rc) == kKeepGraphPoints);
   size_t zero = 0;
   for (const auto& [k, g] : never) zero += g.abs().max().item<double>() == 0;
   CHECK(zero <= 1);  // fdi.key0.bias (see above): the call trains every other parameter
@@ -199,11 +201,11 @@ TEST_CASE("gradients agree with finite differences on a tiny configuration (floa
 TEST_CASE("BatchNorm uses the reference views' statistics at inference by default", "[model][encoder]") {
   const auto frame = test::synthetic_frame();
   EncoderConfig batch_cfg, running_cfg;
-  running_cfg.batchnorm = "running";
+  running_cfg.batchnorm = BatchNormStats::running;
   torch::manual_seed(10);
-  Encoder batch(batch_cfg, true);
+  Encoder batch(batch_cfg, true, 192);
   torch::manual_seed(10);
-  Encoder running(running_cfg, true);
+  Encoder running(running_cfg, true, 192);
   batch->eval();
   running->eval();
   torch::NoGradGuard ng;
@@ -222,4 +224,22 @@ TEST_CASE("BatchNorm uses the reference views' statistics at inference by defaul
                                                               running->model->bn1->running_var, false, 0.1, 1e-5, false));
   CHECK((l0_running - expected_running).abs().max().item<double>() < 1e-5);
   CHECK((l0_running - l0_batch).abs().max().item<double>() > 1e-3);
+}
+
+TEST_CASE("model.transhe.dim sets the width of the painted features, and the network builds and renders with it",
+          "[model][config]") {
+  const auto frame = test::synthetic_frame();
+  auto cfg = test::tiny_model_config();
+  cfg.transhe.dim = 96;
+  cfg.transhe.pe_freqs = 16;  // 6 x pe_freqs = dim
+  cfg.transhe.mlp_dim = 192;
+  torch::manual_seed(11);
+  TransHuman model(cfg);
+  CHECK(model->encoder->reduction_layer->weight.size(0) == 96);
+  torch::NoGradGuard ng;
+  const auto cache = model->prepare(frame.inputs, 0.1);
+  const auto pts = frame.inputs.vertices.narrow(0, 0, 16);
+  const auto raw = model->forward(cache, pts, torch::randn({16, 3}));
+  CHECK(raw.sizes() == torch::IntArrayRef({16, 4}));
+  CHECK(torch::isfinite(raw).all().item<bool>());
 }

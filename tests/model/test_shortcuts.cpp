@@ -4,6 +4,7 @@
 
 #include <array>
 
+#include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
 #include "model/sampling.hpp"
 #include "model/shortcuts.hpp"
@@ -87,7 +88,7 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
   torch::manual_seed(3);
   for (bool raw_rgb : {true, false}) {
     EncoderConfig ec;
-    Encoder enc(ec, raw_rgb);
+    Encoder enc(ec, raw_rgb, 192);
     enc->eval();
     const int64_t V = 3, S = 32, n = 100;
     const auto images = torch::rand({V, 3, S, S});
@@ -120,12 +121,12 @@ TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[m
     DYNAMIC_SECTION(variant) {
       auto c = cfg;
       const std::string v = variant;
-      if (v == "no_coordinate") c.dparf.coordinate = "none";
-      if (v == "absolute") c.dparf.coordinate = "absolute";
+      if (v == "no_coordinate") c.dparf.coordinate = Coordinate::none;
+      if (v == "absolute") c.dparf.coordinate = Coordinate::absolute;
       if (v == "wo_a") c.fdi.appearance = false;
       if (v == "wo_h") c.fdi.human = false;
       if (v == "wo_rgb") c.fdi.raw_rgb = false;
-      if (v == "spc") c.representation = "spc_trilinear", c.spc.voxel_size = 0.1, c.spc.channels = 8;
+      if (v == "spc") c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1, c.spc.channels = 8;
       torch::manual_seed(4);
       TransHuman fast(c);
       auto cd = c;
@@ -136,8 +137,8 @@ TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[m
       torch::NoGradGuard ng;
       const auto pts = frame.inputs.vertices.narrow(0, 0, 64) + 0.05 * torch::randn({64, 3});
       const auto dirs = torch::randn({64, 3});
-      const auto a = fast->forward(fast->prepare(frame.inputs), pts, dirs);
-      const auto b = direct->forward(direct->prepare(frame.inputs), pts, dirs);
+      const auto a = fast->forward(fast->prepare(frame.inputs, 0.1), pts, dirs);
+      const auto b = direct->forward(direct->prepare(frame.inputs, 0.1), pts, dirs);
       INFO("max |raw| " << b.abs().max().item<double>());
       CHECK(max_abs(a, b) < 1e-4 * (1 + b.abs().max().item<double>()));
     }
@@ -168,14 +169,14 @@ TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][sho
   const int64_t nt = 60, n = 500;
   TokenFrames frames{torch::randn({nt, 3}) * 0.3, torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
   const auto xs = torch::randn({n, 3}) * 0.4;
-  for (const char* coordinate : {"relative", "absolute", "none"}) {
+  for (const Coordinate coordinate : {Coordinate::relative, Coordinate::absolute, Coordinate::none}) {
     for (int nk : {1, 4, 7}) {
       DPaRFConfig cfg;
       cfg.coordinate = coordinate;
       cfg.nk = nk;
       DPaRF dparf(cfg);
       const auto a = dparf.query(frames, xs), b = dparf.query_tensors(frames, xs);
-      INFO(coordinate << " nk " << nk);
+      INFO(config::name_of(coordinate) << " nk " << nk);
       CHECK(torch::equal(a.index, b.index));
       CHECK(max_abs(a.weight, b.weight) < 1e-6);
       CHECK(a.coords.defined() == b.coords.defined());
@@ -250,11 +251,11 @@ TEST_CASE("body windows contain the projection of every point within the culling
     dir = dir / dir.norm(2, 1, true);
     const auto radius = r * torch::where(torch::rand({n}) < 0.3, torch::ones({n}), torch::rand({n}).pow(1.0 / 3));
     const auto pts = in.vertices.index_select(0, torch::randint(0, in.vertices.size(0), {n})) + dir * radius.unsqueeze(1);
-    const auto uv = project_points(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).reshape({-1, 2});
+    const auto uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).reshape({-1, 2});
     const auto view = torch::arange(3).repeat({n});
     CHECK(win.taps(uv, view, 64, 64).second.all().item<bool>());
     // The vertices themselves lie inside (left edges checked here).
-    const auto vu = project_points(in.vertices, geo.K, geo.R, geo.T);
+    const auto vu = geometry::project_views(in.vertices, geo.K, geo.R, geo.T);
     for (int64_t v = 0; v < 3; ++v)
       CHECK(win.x0[v] <= std::max<int64_t>(0, int64_t(std::floor(vu[v].select(1, 0).min().item<double>()))));
   }
@@ -264,17 +265,17 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   const auto frame = test::synthetic_frame(300, 24, 3, 48);
   auto c = test::tiny_model_config();
   torch::manual_seed(13);
-  TransHuman windows(c, 0.1);
+  TransHuman windows(c);
   auto ct = c;
   ct.readout_windows = false;
-  TransHuman tables(ct, 0.1);
+  TransHuman tables(ct);
   same_weights_for_inference(windows, tables);
   torch::NoGradGuard ng;
-  const auto a = windows->prepare(frame.inputs), b = tables->prepare(frame.inputs);
-  REQUIRE(a.pixels.alpha.window_table.defined());
-  CHECK(!a.pixels.alpha.table.defined());
-  CHECK(a.pixels.color.window_table.defined());
-  CHECK(!b.pixels.alpha.window_table.defined());
+  const auto a = windows->prepare(frame.inputs, 0.1), b = tables->prepare(frame.inputs, 0.1);
+  REQUIRE(std::holds_alternative<WindowReadouts>(a.pixels));
+  CHECK(std::holds_alternative<PixelReadouts>(b.pixels));
+  // Without a culling distance there are no windows.
+  CHECK(std::holds_alternative<PixelReadouts>(windows->prepare(frame.inputs, 0).pixels));
   torch::manual_seed(14);
   const int64_t n = 500;
   // Near the body (inside the windows) and far from it (read from the levels).
@@ -282,15 +283,15 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   const auto far = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) + 0.6 * torch::randn({n, 3});
   const auto pts = torch::cat({near, far}), dirs = torch::randn({2 * n, 3});
   const auto& in = frame.inputs;
-  const auto uv = project_points(far, in.K.to(torch::kFloat), in.R.to(torch::kFloat), in.T.to(torch::kFloat).reshape({-1, 3, 1}))
+  const auto uv = geometry::project_views(far, in.K.to(torch::kFloat), in.R.to(torch::kFloat), in.T.to(torch::kFloat).reshape({-1, 3, 1}))
                       .permute({1, 0, 2})
                       .reshape({-1, 2});
   const auto view = torch::arange(3).repeat({n});
-  CHECK((~a.pixels.windows.taps(uv, view, 48, 48).second).sum().item<int64_t>() > 100);
+  CHECK((~std::get<WindowReadouts>(a.pixels).windows.taps(uv, view, 48, 48).second).sum().item<int64_t>() > 100);
   const auto ya = windows->forward(a, pts, dirs), yb = tables->forward(b, pts, dirs);
   INFO("max |raw| " << yb.abs().max().item<double>());
   CHECK(max_abs(ya, yb) < 1e-5 * (1 + yb.abs().max().item<double>()));
   // Under autograd (training) the level tables stay.
   torch::AutoGradMode grad(true);
-  CHECK(!windows->prepare(frame.inputs).pixels.alpha.window_table.defined());
+  CHECK(std::holds_alternative<PixelReadouts>(windows->prepare(frame.inputs, 0.1).pixels));
 }

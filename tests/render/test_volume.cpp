@@ -97,7 +97,7 @@ TEST_CASE("progressive rendering equals full rendering and reports skipped point
     net->eval();
     test::center_density(*net, frame, 100.0);
     torch::NoGradGuard ng;
-    const auto cache = net->prepare(frame.inputs);
+    const auto cache = net->prepare(frame.inputs, rc.cull_distance);
     model::FrameField field(*net, cache, rc.chunk_points);
     // Reference: every point evaluated densely, raw zeroed where all vertices are >= 0.1 m away
     // (brute-force distances), then composited.

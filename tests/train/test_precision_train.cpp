@@ -23,7 +23,7 @@ TEST_CASE("a bf16-trained checkpoint holds fp32 weights and evaluates in fp32", 
   CHECK(std::isfinite(summary.last_loss));
 
   const auto fp32 = th::test::tiny_train_config({"precision=fp32", "eval.limit=2", "eval.save_images=false"});
-  th::model::TransHuman model(fp32.model, fp32.render.cull_distance);
+  th::model::TransHuman model(fp32.model);
   th::pipeline::load_weights(*model, run / "checkpoints" / "latest.pt");
   int64_t tensors = 0;
   for (const auto& p : model->named_parameters()) {

@@ -27,7 +27,7 @@ th::Config tiny_config(std::vector<std::string> overrides = {}) {
 }
 
 std::map<std::string, torch::Tensor> weights_of(const fs::path& checkpoint, const th::Config& c) {
-  th::model::TransHuman model(c.model, c.render.cull_distance);
+  th::model::TransHuman model(c.model);
   th::pipeline::load_weights(*model, checkpoint);
   std::map<std::string, torch::Tensor> out;
   for (const auto& p : model->named_parameters()) out[p.key()] = p.value().clone();
@@ -64,7 +64,7 @@ TEST_CASE("a run stopped and resumed ends with the same weights as one that was 
   CHECK(differing == 0);
   // And training changed the weights (the comparison is not between two untouched models).
   torch::manual_seed(uint64_t(c.seed));
-  th::model::TransHuman fresh(c.model, c.render.cull_distance);
+  th::model::TransHuman fresh(c.model);
   size_t changed = 0;
   for (const auto& p : fresh->named_parameters()) changed += !torch::equal(p.value(), wa.at(p.key()));
   CHECK(changed > 10);
@@ -145,7 +145,7 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
   const auto c = tiny_config();
   const auto smpl = th::data::load_body_model(c.data);
   const th::data::Dataset val(c.data, c.data.test_setting, th::data::Dataset::Mode::Test, smpl);
-  th::model::TransHuman model(c.model, c.render.cull_distance);
+  th::model::TransHuman model(c.model);
   {
     // The failure users of the reference code report: density negative everywhere.
     torch::NoGradGuard g;

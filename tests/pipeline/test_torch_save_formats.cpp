@@ -9,7 +9,7 @@
 #include <string>
 
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "pipeline/reference_import.hpp"
 #include "support/test_env.hpp"
 
@@ -87,7 +87,7 @@ void check_contents(const std::map<std::string, torch::Tensor>& sd) {
 }  // namespace
 
 TEST_CASE("torch.save checkpoints of the installed torch import with every dtype",
-          "[model][checkpoint][python]") {
+          "[pipeline][checkpoint][python]") {
   const auto& dir = fixtures();
   std::ifstream layout((dir / "layout.txt").string());
   std::string version;
@@ -112,17 +112,17 @@ TEST_CASE("torch.save checkpoints of the installed torch import with every dtype
 }
 
 TEST_CASE("a big-endian torch.save checkpoint imports byte-swapped",
-          "[model][checkpoint][python]") {
+          "[pipeline][checkpoint][python]") {
   check_contents(read_torch_state_dict(fixtures() / "every_dtype_big.pth", "net"));
   CHECK_THROWS_WITH(read_torch_state_dict(fixtures() / "bad_byteorder.pth", "net"),
                     Catch::Contains("byteorder") && Catch::Contains("middle"));
 }
 
 TEST_CASE("a checkpoint with a corrupt storage record fails naming the file",
-          "[model][checkpoint][python]") {
+          "[pipeline][checkpoint][python]") {
   // LibTorch's zip reader threw c10::Error past read_torch_state_dict for a record whose local
   // header is damaged (it does not check CRCs, so a damaged header is what it notices).
-  std::string bytes = io::detail::read_file(fixtures() / "every_dtype.pth");
+  std::string bytes = io::read_file(fixtures() / "every_dtype.pth");
   const size_t name = bytes.find("/data/0");  // first in the local header of that record
   REQUIRE(name != std::string::npos);
   const size_t header = bytes.rfind("PK\x03\x04", name);

@@ -35,9 +35,9 @@ Difference render_difference(Frames& f, const Products& a, const Products& b, si
     const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
     torch::NoGradGuard no_grad;
     f.model->set_products(a);
-    const auto ra = th::model::render_rays(*f.model, f.model->prepare(inputs), rays, rc);
+    const auto ra = th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc, th::pipeline::kInference);
     f.model->set_products(b);
-    const auto rb = th::model::render_rays(*f.model, f.model->prepare(inputs), rays, rc);
+    const auto rb = th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc, th::pipeline::kInference);
     REQUIRE(ra.acc.max().item<double>() > 0.5);  // the trained body is visible
     REQUIRE(rb.rgb.scalar_type() == torch::kFloat);
     const auto drgb = (ra.rgb - rb.rgb).abs(), dacc = (ra.acc - rb.acc).abs();
@@ -114,8 +114,8 @@ TEST_CASE("a bf16 training step's loss and gradients stay within 1% and 2% of fp
     f.model->set_products(products);
     f.model->zero_grad();
     torch::manual_seed(4);  // the same stratified samples
-    const auto cache = f.model->prepare(inputs);
-    const auto img = th::model::render_training_rays(*f.model, cache, rays, f.config.render);
+    const auto cache = th::pipeline::prepare_frame(*f.model, inputs, f.config.render);
+    const auto img = th::pipeline::render(*f.model, cache, rays, f.config.render, {true, false});
     const auto loss = (img.rgb - 0.5).pow(2).mean();
     loss.backward();
     Step out{loss.item<double>(), {}};

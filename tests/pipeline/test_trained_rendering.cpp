@@ -72,7 +72,7 @@ TEST_CASE("on a trained network, early ray termination stays within its bound of
         const auto s = f.dataset->load(i, 0);
         const auto inputs = f.inputs(s);
         torch::NoGradGuard no_grad;
-        const auto cache = f.model->prepare(inputs);
+        const auto cache = th::pipeline::prepare_frame(*f.model, inputs, f.config.render);
         const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
         CountingField exact_field(*f.model, cache, exact_rc.chunk_points);
         CountingField fast_field(*f.model, cache, fast_rc.chunk_points);
@@ -106,12 +106,13 @@ TEST_CASE("on a trained network, readout windows render every ray as the per-lev
     for (size_t i = 0; i < std::min<size_t>(windows.dataset->size(), 4); ++i) {
       const auto s = windows.dataset->load(i, 0);
       torch::NoGradGuard no_grad;
-      const auto a = windows.model->prepare(windows.inputs(s)), b = tables.model->prepare(tables.inputs(s));
-      REQUIRE(a.pixels.alpha.window_table.defined());
-      REQUIRE(!b.pixels.alpha.window_table.defined());
+      const auto a = th::pipeline::prepare_frame(*windows.model, windows.inputs(s), rc),
+                 b = th::pipeline::prepare_frame(*tables.model, tables.inputs(s), rc);
+      REQUIRE(std::holds_alternative<th::model::WindowReadouts>(a.pixels));
+      REQUIRE(std::holds_alternative<th::model::PixelReadouts>(b.pixels));
       const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
-      const auto fast = th::model::render_rays(*windows.model, a, rays, rc);
-      const auto exact = th::model::render_rays(*tables.model, b, rays, rc);
+      const auto fast = th::pipeline::render(*windows.model, a, rays, rc, th::pipeline::kInference);
+      const auto exact = th::pipeline::render(*tables.model, b, rays, rc, th::pipeline::kInference);
       CAPTURE(samples, s.human, s.frame, s.target_view);
       CHECK((fast.rgb - exact.rgb).abs().max().item<double>() <= 1e-3);
       CHECK((fast.acc - exact.acc).abs().max().item<double>() <= 1e-3);
@@ -144,7 +145,7 @@ TEST_CASE("a frame prepared once renders each of its views as preparing it for e
   auto s = f.dataset->load(0, 0);
   auto inputs = f.inputs(s);
   inputs.Th = inputs.Th + 1e-3;
-  reuse.prepare(*f.model, inputs);
+  reuse.prepare(*f.model, inputs, f.config.render);
   CHECK(reuse.prepared() == 2);
 }
 

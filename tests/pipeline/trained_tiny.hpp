@@ -44,7 +44,7 @@ struct Frames {
   std::unique_ptr<pipeline::Tokens> tokens;
 
   explicit Frames(Config c) : config(std::move(c)) {
-    model = model::TransHuman(config.model, config.render.cull_distance);
+    model = model::TransHuman(config.model);
     pipeline::load_weights(*model, trained_checkpoint());
     model->eval();
     const auto smpl = data::load_body_model(config.data);

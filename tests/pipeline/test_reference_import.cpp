@@ -9,6 +9,7 @@
 #include "io/npy.hpp"
 #include "model/pretrained.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/pipeline.hpp"
 #include "pipeline/reference_import.hpp"
 #include "model/frame_fixture.hpp"
 #include "model/transhuman.hpp"
@@ -45,7 +46,7 @@ const std::filesystem::path& fixtures() {
 
 }  // namespace
 
-TEST_CASE("a reference .pth imports with equal tensors", "[model][checkpoint]") {
+TEST_CASE("a reference .pth imports with equal tensors", "[pipeline][checkpoint]") {
   const auto& dir = fixtures();
   const auto expected = expected_tensors(dir);
   for (const char* file : {"full.pth", "bare.pth"}) {
@@ -83,7 +84,7 @@ TEST_CASE("a reference .pth imports with equal tensors", "[model][checkpoint]") 
         "encoder.model.layer2.0.downsample.1.running_mean");
 }
 
-TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[model][checkpoint]") {
+TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[pipeline][checkpoint]") {
   const auto& dir = fixtures();
   TransHuman model(ModelConfig{});
   const auto before = model->heads->fc_3->weight.clone();
@@ -113,14 +114,14 @@ TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[model][checkp
                         Catch::Contains("], the model expects ["));
 }
 
-TEST_CASE("the full checkpoint's other entries are readable", "[model][checkpoint]") {
+TEST_CASE("the full checkpoint's other entries are readable", "[pipeline][checkpoint]") {
   const auto all = read_torch_state_dict(fixtures() / "full.pth", "");
   CHECK(all.count("net.fc_0.weight"));
   CHECK(all.at("epoch").item<int64_t>() == 2100);
   CHECK(all.at("recorder.step").item<int64_t>() == 1234);
 }
 
-TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[model][checkpoint]") {
+TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[pipeline][checkpoint]") {
   const auto& dir = fixtures();
   REQUIRE(test::run_python("scripts/export_pretrained.py",
                            "--weights " + (dir / "resnet18.pth").string() + " --out " + (dir / "resnet18.npz").string()) == 0);
@@ -138,7 +139,7 @@ TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[model]
   }
 }
 
-TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip", "[model][checkpoint]") {
+TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip", "[pipeline][checkpoint]") {
   const auto dir = test::scratch_dir("checkpoint_own");
   TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());
   save_model_weights(*a, dir / "model.pt");
@@ -156,7 +157,7 @@ TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip
   CHECK_THROWS_WITH(load_pretrained_encoder(*b->encoder, dir / "broken.npz"), Catch::Contains("layer1.0.conv1.weight"));
 }
 
-TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", "[model][checkpoint][parity]") {
+TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", "[pipeline][checkpoint][parity]") {
   // METHOD 3.2 [parity]: PyTorch's addcmul rounds x * f + phase once; at frequencies up to
   // 2^31 pi that decides the value. The table here is computed by the installed PyTorch.
   torch::manual_seed(2);
@@ -170,12 +171,12 @@ TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", 
   CHECK(torch::equal(ours, table));
   // The separately rounded form (the old default) is another table.
   TransHEConfig separate;
-  separate.pe_rounding = "separate";
+  separate.pe_rounding = PeRounding::separate;
   const auto other = TransHE(separate)->encode_positions(x);
   CHECK((other != table).sum().item<int64_t>() > 100);
 }
 
-TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end", "[model][checkpoint][parity]") {
+TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end", "[pipeline][checkpoint][parity]") {
   // The Python side (tests/python/model_reference.py render, written from docs/METHOD.md in PyTorch)
   // loads the .pth that torch.save wrote and renders the rays of a small frame; the C++ import of
   // the same file, with the default configuration, must give the same density, colour, acc and
@@ -192,8 +193,8 @@ TEST_CASE("a reference checkpoint renders the independent Python reference's ray
   model->eval();
   torch::NoGradGuard no_grad;
   const RenderConfig rc;  // defaults: 64 samples, progressive
-  const auto cache = model->prepare(f.inputs);
-  const auto ours = render_rays(*model, cache, rays, rc);
+  const auto cache = prepare_frame(*model, f.inputs, rc);
+  const auto ours = th::pipeline::render(*model, cache, rays, rc, th::pipeline::kInference);
   // Raw density of every sample (culled samples compared as 0 below).
   const int64_t S = rc.samples;
   const auto t = torch::linspace(0, 1, S);

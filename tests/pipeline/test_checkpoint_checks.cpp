@@ -8,7 +8,7 @@
 
 #include "core/config_io.hpp"
 #include "core/error.hpp"
-#include "io/bytes.hpp"
+#include "io/files.hpp"
 #include "io/zip.hpp"
 #include "pipeline/checked_load.hpp"
 #include "model/transhuman.hpp"
@@ -28,7 +28,7 @@ th::Config tiny_config(std::vector<std::string> overrides = {}) {
 
 th::model::TransHuman make_model(const th::Config& c) {
   torch::manual_seed(3);
-  return th::model::TransHuman(c.model, c.render.cull_distance);
+  return th::model::TransHuman(c.model);
 }
 
 // Our checkpoint layout with the model alone (every record is a weight), optionally without
@@ -45,10 +45,10 @@ void save_model_only(th::model::TransHumanImpl& model, const fs::path& file, boo
 void rewrite_zip(const fs::path& file,
                  const std::function<void(std::vector<std::pair<std::string, std::string>>&)>& edit) {
   std::vector<std::pair<std::string, std::string>> members;
-  for (auto& m : th::io::detail::read_zip(th::io::detail::read_file(file), file.string()))
+  for (auto& m : th::io::read_zip(th::io::read_file(file), file.string()))
     members.emplace_back(m.name, std::move(m.data));
   edit(members);
-  th::io::detail::write_file_atomic(file, th::io::detail::write_zip(members));
+  th::io::write_file_atomic(file, th::io::write_zip(members));
 }
 
 std::string error_of(const std::function<void()>& fn) {
@@ -62,19 +62,19 @@ std::string error_of(const std::function<void()>& fn) {
 
 }  // namespace
 
-TEST_CASE("a checkpoint's weights load back exactly through the checked reader", "[train][checkpoint]") {
+TEST_CASE("a checkpoint's weights load back exactly through the checked reader", "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto a = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_roundtrip");
   save_model_only(*a, dir / "a.pt", true);
   torch::manual_seed(99);
-  th::model::TransHuman b(c.model, c.render.cull_distance);
+  th::model::TransHuman b(c.model);
   th::pipeline::load_weights(*b, dir / "a.pt");
   const auto pa = a->named_parameters(), pb = b->named_parameters();
   for (const auto& p : pa) CHECK(torch::equal(p.value(), pb[p.key()]));
 }
 
-TEST_CASE("a storage record truncated inside a valid zip is refused, naming the file", "[train][checkpoint]") {
+TEST_CASE("a storage record truncated inside a valid zip is refused, naming the file", "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_truncated"), file = dir / "cut.pt";
@@ -100,7 +100,7 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
                           Catch::Contains(" elements of 4 bytes are claimed"));
 }
 
-TEST_CASE("non-finite weights are refused naming the tensor and the index", "[train][checkpoint]") {
+TEST_CASE("non-finite weights are refused naming the tensor and the index", "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   {
@@ -116,13 +116,13 @@ TEST_CASE("non-finite weights are refused naming the tensor and the index", "[tr
 }
 
 TEST_CASE("compressed storage records and inflated claims are refused from the zip directory alone",
-          "[train][checkpoint]") {
+          "[pipeline][checkpoint]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_deflate"), file = dir / "packed.pt";
   // Stored zips whose method fields say deflate (a repacked file; a zip bomb claiming gigabytes):
   // nothing is inflated or allocated.
   auto write = [&](const std::string& member, uint32_t claimed) {
     const std::string empty_dict_pickle("\x80\x02}q\x00.", 6);
-    std::string zip = th::io::detail::write_zip(
+    std::string zip = th::io::write_zip(
         {{"archive/version", "3\n"}, {"archive/data.pkl", empty_dict_pickle}, {member, std::string(100, 'x')}});
     // The member's local header and central directory entry: method 8, `claimed` bytes.
     auto patch = [&](uint32_t signature, size_t method_at, size_t size_at, size_t name_at) {
@@ -135,7 +135,7 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
     };
     patch(0x04034b50, 8, 22, 30);   // local header: method, uncompressed size, name
     patch(0x02014b50, 10, 24, 46);  // central directory
-    th::io::detail::write_file_atomic(file, zip);
+    th::io::write_file_atomic(file, zip);
   };
   write("archive/data/0", 100);
   CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
@@ -148,12 +148,12 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
   write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
   CHECK_NOTHROW(th::pipeline::check_checkpoint_archive(file));
   // LibTorch's reader is not opened on a zip that is not a checkpoint.
-  th::io::detail::write_file_atomic(file, th::io::detail::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
+  th::io::write_file_atomic(file, th::io::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
   CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("not a PyTorch checkpoint (no <archive>/version record)"));
 }
 
-TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]") {
+TEST_CASE("tensor views are checked against their storage", "[pipeline][checkpoint]") {
   using th::pipeline::check_view;
   CHECK_NOTHROW(check_view({2, 3}, {3, 1}, 0, 6, "v"));
   CHECK_NOTHROW(check_view({3, 2}, {1, 3}, 0, 6, "v"));  // transposed
@@ -173,7 +173,7 @@ TEST_CASE("tensor views are checked against their storage", "[train][checkpoint]
 }
 
 TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_mismatch=warn goes on",
-          "[train][checkpoint]") {
+          "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_settings");
@@ -204,7 +204,7 @@ TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_m
   CHECK_NOTHROW(th::pipeline::load_weights(*b, dir / "bare.pt"));
 }
 
-TEST_CASE("missing, extra and reshaped parameters name the config key that decides them", "[train][checkpoint]") {
+TEST_CASE("missing, extra and reshaped parameters name the config key that decides them", "[pipeline][checkpoint]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_shapes");
   auto load_into = [&](const th::Config& saved, const th::Config& wanted) {
     auto a = make_model(saved);
@@ -237,7 +237,7 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
   CHECK(torch::equal(b->heads->alpha_fc->weight, before));
 }
 
-TEST_CASE("a resumed run's optimiser state must be finite too", "[train][checkpoint]") {
+TEST_CASE("a resumed run's optimiser state must be finite too", "[pipeline][checkpoint]") {
   torch::set_num_threads(1);
   const auto c = tiny_config({"train.val_views=0"});
   const fs::path run = th::test::scratch_dir("ckcheck_adam"), latest = run / "checkpoints" / "latest.pt";
