@@ -6,15 +6,28 @@ set(TH_WARNINGS -Wall -Wextra -Wno-unused-parameter)
 # One precompiled <torch/torch.h> for the whole project: th_pch owns it, every other target
 # reuses it (the flags below are identical everywhere, which REUSE_FROM requires).
 add_library(th_pch STATIC ${PROJECT_SOURCE_DIR}/lib/core/pch.cpp)
-# LibTorch archives and PyTorch wheels ship fmt headers of their own in their include folder; the
-# spdlog we link was built against the system's fmt, whose headers must therefore come first.
-# (A system fmt in /usr/include cannot be put first: the compiler searches it last. Such a setup
-# needs an spdlog built with LibTorch's fmt, or a LibTorch without its own fmt, docs/BUILDING.md.)
-if(TARGET fmt::fmt)
-  get_target_property(TH_FMT_INCLUDE fmt::fmt INTERFACE_INCLUDE_DIRECTORIES)
-  if(TH_FMT_INCLUDE)
-    target_include_directories(th_pch SYSTEM BEFORE PUBLIC ${TH_FMT_INCLUDE})
+# LibTorch archives and PyTorch wheels ship fmt headers of their own in their include folder,
+# which would shadow the fmt that the linked spdlog was built against. Then the system fmt goes
+# first, through a folder of the build tree that holds only a link to its fmt/ (a compiler
+# searches /usr/include last whatever the flags say, so that folder itself cannot be put first).
+set(TH_TORCH_FMT OFF)
+foreach(dir ${TORCH_INCLUDE_DIRS})
+  if(EXISTS "${dir}/fmt/format.h")
+    set(TH_TORCH_FMT ON)
   endif()
+endforeach()
+if(TH_TORCH_FMT AND TARGET fmt::fmt)
+  get_target_property(fmt_dirs fmt::fmt INTERFACE_INCLUDE_DIRECTORIES)
+  foreach(dir ${fmt_dirs})
+    if(EXISTS "${dir}/fmt/format.h")
+      set(shadow "${CMAKE_BINARY_DIR}/fmt_before_libtorch")
+      file(MAKE_DIRECTORY "${shadow}")
+      file(REMOVE "${shadow}/fmt")
+      file(CREATE_LINK "${dir}/fmt" "${shadow}/fmt" SYMBOLIC)
+      target_include_directories(th_pch SYSTEM BEFORE PUBLIC "${shadow}")
+      message(STATUS "LibTorch ships fmt headers: the system fmt (${dir}/fmt) is searched first")
+    endif()
+  endforeach()
 endif()
 target_include_directories(th_pch SYSTEM PUBLIC ${TORCH_INCLUDE_DIRS} ${OpenCV_INCLUDE_DIRS})
 target_link_libraries(th_pch PUBLIC ${TORCH_LIBRARIES})
