@@ -15,6 +15,7 @@
 #include "mesh/marching_cubes.hpp"
 #include "mesh/ply.hpp"
 #include "mesh/preview.hpp"
+#include "render/chunks.hpp"
 #include "video/frame_writer.hpp"
 
 namespace th::inference {
@@ -96,15 +97,15 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   mesh::MarchingCubes mc(grid.height, grid.width, grid.spec, {request.threshold, kPad, 0.f});
   Progress progress("density", grid.depth, "slice");
   std::vector<torch::Tensor> seen;  // a subsample of the evaluated densities, for the statistics
-  for (int64_t z0 = 0; z0 < grid.depth; z0 += slab) {
-    const int64_t d = std::min(slab, grid.depth - z0);
+  render::for_each_chunk(grid.depth, slab, [&](int64_t z0, int64_t z1) {
+    const int64_t d = z1 - z0;
     const auto sigma = session.density(prepared, mesh::slab_points(grid, z0, d));
     const auto evaluated = sigma.index({sigma != 0});
     summary.evaluated_points += evaluated.numel();
     seen.push_back(evaluated.slice(0, 0, evaluated.numel(), std::max<int64_t>(1, evaluated.numel() / 4096)));
     mc.push(sigma.reshape({d, grid.height, grid.width}));
     progress.advance(d);
-  }
+  });
   progress.finish();
   summary.mesh = mc.finish();
   // Where the threshold sits in the density the network produced near the body: what a user

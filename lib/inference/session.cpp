@@ -125,9 +125,12 @@ std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& fra
   // A band of rows at a time: the rays' memory is bounded by the band, not by the image (a
   // 512x512 view is one band).
   const int64_t rows = std::max<int64_t>(1, control.band_pixels / width);
-  for (int64_t y0 = 0; y0 < height; y0 += rows) {
-    if (control.cancelled && control.cancelled()) return std::nullopt;
-    const int64_t y1 = std::min<int64_t>(height, y0 + rows);
+  bool cancelled = false;
+  render::for_each_chunk(height, rows, [&](int64_t y0, int64_t y1) {
+    if (cancelled || (control.cancelled && control.cancelled())) {
+      cancelled = true;
+      return;
+    }
     auto pixels = data::pixel_grid(width, int(y1 - y0));
     pixels.select(1, 1).add_(y0);
     const auto rays = data::pixel_rays(pixels, camera.K, camera.R, camera.T);
@@ -135,14 +138,15 @@ std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& fra
     const auto valid = nf.valid;
     auto f = [&](const torch::Tensor& t) { return t.index({valid}).to(device_, torch::kFloat32); };
     const render::Rays r{f(rays.origins), f(rays.dirs), f(nf.near), f(nf.far)};
-    if (r.size() == 0) continue;
+    if (r.size() == 0) return;
     const auto vp = pixels.index({valid});
     const auto flat = vp.select(1, 1) * width + vp.select(1, 0);
     const auto result = pipeline::render(*model_, frame.cache, r, config, pipeline::kInference);
     rgb.index_copy_(0, flat, result.rgb.to(torch::kCPU, torch::kFloat32));
     depth.index_copy_(0, flat, result.depth.to(torch::kCPU, torch::kFloat32));
     acc.index_copy_(0, flat, result.acc.to(torch::kCPU, torch::kFloat32));
-  }
+  });
+  if (cancelled) return std::nullopt;
   pipeline::require_finite_output(rgb, "checkpoint '" + checkpoint_.string() + "', " + frame.sample.human +
                                            " frame " + std::to_string(frame.sample.frame));
   return ViewImages{rgb.view({height, width, 3}), depth.view({height, width}), acc.view({height, width})};

@@ -1,6 +1,7 @@
 #pragma once
 // METHOD 3.1: the image encoder (ResNet-18 up to layer2, torchvision layout and names), the
-// 384-channel pixel feature p_v, the 192-channel reduction and the painting of the body.
+// 384-channel pixel feature p_v, the reduction to model.transhe.dim (192) channels and the
+// painting of the body.
 //
 // The pixel feature is the concatenation of three bilinearly upsampled ResNet levels and a 1x1
 // convolution of the raw image. It is never materialised at full resolution on the fast path:
