@@ -183,6 +183,12 @@ Taps PixelGeometry::image_taps(const torch::Tensor& uv, const torch::Tensor& vie
   return multi_level_taps(uv, view, {{height, width}}, {0}, height, width);
 }
 
+std::pair<torch::Tensor, torch::Tensor> PixelGeometry::point_view_rows(const torch::Tensor& uv) {
+  const auto n = uv.size(0), V = uv.size(1);
+  const auto options = torch::TensorOptions().dtype(torch::kLong).device(uv.device());
+  return {uv.reshape({-1, 2}), torch::arange(V, options).repeat({n})};
+}
+
 torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_taps) const {
   auto out = weighted_gather(table, level_taps, table_grad_sink);
   if (image_weight.defined()) out.addmm_(weighted_gather(image_table, image_taps), image_weight.t());
@@ -248,11 +254,9 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
 }
 
 torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const torch::Tensor& uv) const {
-  const auto n = uv.size(0), V = uv.size(1);
-  const auto flat = uv.reshape({-1, 2});
-  const auto view = torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(uv.device())).repeat({n});
+  const auto [flat, view] = PixelGeometry::point_view_rows(uv);
   return sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view), enc.geometry.image_taps(flat, view))
-      .view({n, V, -1});
+      .view({uv.size(0), uv.size(1), -1});
 }
 
 std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::TensorOptions& options) const {

@@ -83,6 +83,9 @@ struct PixelGeometry {
   // - the image table (V H W rows; plain bilinear).
   Taps stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
   Taps image_taps(const torch::Tensor& uv, const torch::Tensor& view) const;
+  // The rows of N points x V views, point-major: uv (N, V, 2) as (N V, 2), and each row's view
+  // (N V) int64; the arguments of the taps above.
+  static std::pair<torch::Tensor, torch::Tensor> point_view_rows(const torch::Tensor& uv);
 };
 
 // The encoder output of one frame.

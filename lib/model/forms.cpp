@@ -79,18 +79,13 @@ class ReadoutForm final : public PixelForm {
   }
 
  private:
-  // Rows (n, v) of points x views, n-major: the projections flattened and their views.
-  static std::pair<torch::Tensor, torch::Tensor> rows(const torch::Tensor& uv) {
-    const auto n = uv.size(0), V = uv.size(1);
-    return {uv.reshape({-1, 2}), torch::arange(V, torch::TensorOptions().dtype(torch::kLong).device(uv.device())).repeat({n})};
-  }
   static torch::Tensor read(const PixelReadouts& px, const PixelReadout& readout, const torch::Tensor& uv) {
-    const auto [flat, view] = rows(uv);
+    const auto [flat, view] = PixelGeometry::point_view_rows(uv);
     return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
         .view({uv.size(0), uv.size(1), -1});
   }
   torch::Tensor read(const WindowReadouts& px, const WindowReadout& readout, const torch::Tensor& uv) const {
-    const auto [flat, view] = rows(uv);
+    const auto [flat, view] = PixelGeometry::point_view_rows(uv);
     const auto& g = px.levels.enc.geometry;
     const auto [taps, inside] = px.windows.taps(flat, view, g.height, g.width);
     auto out = weighted_gather(readout.table, taps);
