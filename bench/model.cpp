@@ -9,6 +9,7 @@
 // Memory: peak resident set size of the process during the measured section, minus the
 // resident size before it (Linux VmHWM after resetting it through /proc/self/clear_refs).
 #include <CLI/CLI.hpp>
+#include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
 
 #include <malloc.h>
@@ -198,6 +199,8 @@ int main(int argc, char** argv) {
   std::vector<std::string> precisions{"fp32"};
   cli.add_option("--precision", precisions, "precision paths side by side: fp32-blas fp32 bf16 auto")
       ->check(CLI::IsMember({"fp32-blas", "fp32", "bf16", "auto"}));
+  std::string trace;
+  cli.add_option("--trace", trace, "write a Chrome trace of three forward+backward calls to this file");
   bool system_malloc = false;
   cli.add_flag("--system-malloc", system_malloc, "keep glibc's default mmap use for large blocks");
   CLI11_PARSE(cli, argc, argv);
@@ -306,6 +309,50 @@ int main(int argc, char** argv) {
       px.alpha.image_table = px.alpha.image_table.detach();
       px.color.image_table = px.color.image_table.detach();
     }
+    // The training path's frame: the frame tensors as fresh leaves without gradient sinks, read by
+    // one field call that chunks, recomputes and checkpoints inside.
+    auto training_cache = [&] {
+      model::FrameCache cache_t = cache_g;
+      cache_t.visit([](torch::Tensor& t, torch::Tensor* sink) {
+        if (sink) *sink = torch::Tensor();
+        if (t.defined() && t.requires_grad()) t = t.detach().requires_grad_(true);
+      });
+      return cache_t;
+    };
+    // Operator trace at the first chunk size and precision, for comparing two builds operator by
+    // operator (scripts/compare-traces.py): three forward+backward calls (graph kept) and one
+    // training-path call of four chunks; then both timed untraced.
+    if (!trace.empty()) {
+      net->set_products(products_of(precisions.front()));
+      const int64_t c = std::min<int64_t>(chunks.front(), pts.size(0));
+      const int64_t m = std::min<int64_t>(4 * c, pts.size(0));
+      auto fwd_bwd = [&] {
+        const auto raw = net->forward(cache_g, pts.narrow(0, 0, c), dirs.narrow(0, 0, c));
+        raw.backward(torch::ones_like(raw));
+      };
+      model::FrameCache cache_t = training_cache();
+      model::FrameField field(*net, cache_t, c, true);
+      auto training = [&] {
+        const auto raw = field.raw(pts.narrow(0, 0, m), dirs.narrow(0, 0, m));
+        raw.backward(torch::ones_like(raw));
+      };
+      fwd_bwd(), training();  // warm-up
+      {
+        torch::autograd::profiler::RecordProfile record(trace);
+        for (int i = 0; i < 3; ++i) fwd_bwd();
+        training();
+      }
+      auto ms_per_call = [](int calls, auto&& fn) {
+        const auto t0 = Clock::now();
+        for (int i = 0; i < calls; ++i) fn();
+        return seconds_since(t0) * 1000 / calls;
+      };
+      const double fb_ms = ms_per_call(20, fwd_bwd), train_ms = ms_per_call(5, training);
+      net->zero_grad();
+      std::cout << "Operator trace (" << precisions.front() << "): " << trace << "; untraced: forward+backward of "
+                << c << " points " << fmt(fb_ms, 1) << " ms per call (20 calls), training path of " << m << " points "
+                << fmt(train_ms, 1) << " ms per call (5 calls)" << std::endl;
+    }
     // Rounds over all chunk sizes; each cell keeps its best round (the machine is shared).
     struct Cell { double fwd = 0, dfirst = 0, fb = 0, train = 0, mem = 0; render::Profile profile; double fwd_s = 0; };
     std::map<std::pair<int64_t, size_t>, Cell> best;
@@ -343,11 +390,7 @@ int main(int argc, char** argv) {
         raw.backward(torch::ones_like(raw));
       });
       // The training path: one field call for all points, chunked and recomputed inside.
-      model::FrameCache cache_t = cache_g;
-      cache_t.visit([](torch::Tensor& t, torch::Tensor* sink) {
-        if (sink) *sink = torch::Tensor();
-        if (t.defined() && t.requires_grad()) t = t.detach().requires_grad_(true);
-      });
+      model::FrameCache cache_t = training_cache();
       model::FrameField field(*net, cache_t, chunk, true);
       PeakMemory mem;
       int reps = 0;
