@@ -16,6 +16,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
@@ -200,7 +201,8 @@ int main(int argc, char** argv) {
   cli.add_option("--precision", precisions, "precision paths side by side: fp32-blas fp32 bf16 auto")
       ->check(CLI::IsMember({"fp32-blas", "fp32", "bf16", "auto"}));
   std::string trace;
-  cli.add_option("--trace", trace, "write a Chrome trace of three forward+backward calls to this file");
+  cli.add_option("--trace", trace,
+                 "write a Chrome trace of three forward+backward calls and one training-path call to this file");
   bool system_malloc = false;
   cli.add_flag("--system-malloc", system_malloc, "keep glibc's default mmap use for large blocks");
   CLI11_PARSE(cli, argc, argv);
@@ -323,6 +325,10 @@ int main(int argc, char** argv) {
     // operator (scripts/compare-traces.py): three forward+backward calls (graph kept) and one
     // training-path call of four chunks; then both timed untraced.
     if (!trace.empty()) {
+      if (!std::ofstream(trace)) {
+        std::cerr << "transhuman-bench-model: cannot write the trace file '" << trace << "'" << std::endl;
+        return 1;
+      }
       net->set_products(products_of(precisions.front()));
       const int64_t c = std::min<int64_t>(chunks.front(), pts.size(0));
       const int64_t m = std::min<int64_t>(4 * c, pts.size(0));
@@ -341,6 +347,16 @@ int main(int argc, char** argv) {
         torch::autograd::profiler::RecordProfile record(trace);
         for (int i = 0; i < 3; ++i) fwd_bwd();
         training();
+      }
+      // The profiler writes while it stops and reports nothing: a complete trace ends its event list.
+      std::ifstream written(trace);
+      const std::string text((std::istreambuf_iterator<char>(written)), std::istreambuf_iterator<char>());
+      const auto last = text.find_last_not_of(" \n");
+      if (last == std::string::npos || text[last] != ']') {
+        std::remove(trace.c_str());
+        std::cerr << "transhuman-bench-model: the trace file '" << trace
+                  << "' was not written completely (disk full?); the partial file is removed" << std::endl;
+        return 1;
       }
       auto ms_per_call = [](int calls, auto&& fn) {
         const auto t0 = Clock::now();
