@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The end-to-end speed benchmark: several paths side by side on the demo's trained checkpoint
-# (trained first when runs/demo has none: about 12 minutes on 2 cores): a 512x512 test view at
+# (trained first, as scripts/demo.sh trains it, when runs/demo has none): a 512x512 test view at
 # 64 and 16 samples per ray (seconds, points evaluated, peak memory, per-ray differences), the
 # 36-view orbit at 512x512, seconds per training step at configs/demo.yaml, and the demo's
 # identity evaluation (108 views, with each rendered image compared with the reference path's).

@@ -8,7 +8,7 @@
 #                                                picks the tests to run)
 # Idempotent: the root is made once and reused (packages are only installed when missing), the
 # build folder (build-libtorch2/ in the repository) is reused too. Not part of .ci/run (the
-# first run downloads and installs about 1.5 GB).
+# first run downloads and installs Debian 13's packages; their size: docs/TESTING.md).
 #   TH_TRIXIE_ROOT   where the root lives (default /var/cache/transhuman/trixie-root)
 #   TH_DEBIAN_MIRROR the Debian mirror (default: the host's apt sources' one for its release)
 #   TH_JOBS          parallel build and test jobs (default: nproc)

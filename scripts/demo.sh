@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The main job, as a new user runs it: installs dependencies, builds, generates the synthetic
-# dataset if absent, trains configs/demo.yaml (about 15 minutes on 2 cores), evaluates identity
+# dataset if absent, trains configs/demo.yaml (its time: README, Set-up), evaluates identity
 # generalization on the unseen synthetic people, prints the table and writes report/ (scores,
 # evaluation panels, training curve, a 36-view orbit video and a mesh of an unseen person), with
 # report/index.html showing all of it in a browser (3D viewer included).
@@ -29,9 +29,9 @@ ckpt=$run/checkpoints/latest.pt
 # Free-viewpoint video: the METHOD 7 orbit (36 views) around an unseen person.
 "$bin/transhuman-render" --config configs/demo.yaml --checkpoint "$ckpt" --out "$run/orbit" \
   --human CoreView_s08 --force
-# A mesh of the same person. METHOD 7's threshold of 20 suits a fully trained model; after the
-# demo's 11 minutes the density near the body peaks around 25 (the log prints its quantiles),
-# so the demo cuts at 8, on a 1 cm grid.
+# A mesh of the same person. METHOD 7's threshold of 20 suits a fully trained model; the
+# demo's short-trained one barely exceeds it near the body (its peak: docs/USAGE.md,
+# transhuman-mesh; the log prints the quantiles), so the demo cuts at 8, on a 1 cm grid.
 "$bin/transhuman-mesh" --config configs/demo.yaml --checkpoint "$ckpt" --out "$run/mesh" \
   --human CoreView_s08 --voxel 0.01 --threshold 8 --colors
 

@@ -15,11 +15,11 @@ int64_t physical_memory_bytes();
 double memory_limit_bytes(double max_memory_gb);
 
 // Bytes of working memory per point of a network chunk (features of every reference view,
-// the FDI and head activations): a 512x512 render at chunk_points 4096 peaks at 841 MiB of
-// tensors (bench/results/model.md), which this constant bounds from above.
+// the FDI and head activations): an upper bound of the peak tensor memory of the 512x512
+// render in bench/results/model.md at chunk_points 4096.
 constexpr double kBytesPerChunkPoint = 200.0 * 1024;
-// Network samples per second per CPU thread in a progressive render (bench/results/model.md:
-// 3.1 M samples of a 512x512 view in 22.5 s on 2 threads), for the time estimate.
+// Network samples per second per CPU thread in a progressive render, for the time estimate:
+// the rate of the 512x512 render in bench/results/model.md, rounded.
 constexpr double kSamplesPerSecondPerThread = 70000;
 
 struct Estimate {

@@ -19,10 +19,10 @@
 // converted at the boundary (measured: conversion costs less than bf16 loads in those kernels).
 // Weights stay fp32 parameters and are cast per use, so gradients reach fp32 master weights.
 //
-// fp32 products: oneDNN (a reorder in, the product, a reorder out) runs 2-3x faster than
-// OpenBLAS on the per-point shapes at 2 threads and sums in another order (results differ by
-// float rounding, ~1e-7 relative per product); it is taken for products of at least
-// kOneDnnMinRows rows when LibTorch is built with it (`fp32_products: auto`).
+// fp32 products: oneDNN (a reorder in, the product, a reorder out) runs faster than OpenBLAS
+// on the per-point shapes and sums in another order (results differ by float rounding; the
+// figures are in docs/PERFORMANCE.md); it is taken for products of at least kOneDnnMinRows rows
+// when LibTorch is built with it (`fp32_products: auto`).
 
 #include <torch/types.h>
 

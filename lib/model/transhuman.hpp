@@ -104,7 +104,7 @@ class FrameField : public render::RadianceField {
 };
 
 // render.train_recompute "auto": training field calls of up to this many points keep their
-// chunks' graphs (the demo's 16,384 samples per step; about 60 MiB of graph per 1,000 points).
+// chunks' graphs (the demo's 16,384 samples per step; the memory it costs: docs/PERFORMANCE.md).
 constexpr int64_t kKeepGraphPoints = 65536;
 
 // Active parameters per module (METHOD 3.4): encoder (ResNet-18 to layer2), reduction + colour,

@@ -1,7 +1,7 @@
 #pragma once
 // A minimal PNG encoder for 8-bit single-channel masks. OpenCV's writer tries every PNG row
-// filter on every row (about 2 ms for a 512x512 mask); masks are long runs of one value, for
-// which no filter plus run-length deflate is both smaller and about ten times faster.
+// filter on every row; masks are long runs of one value, for which no filter plus run-length
+// deflate is both smaller and faster.
 
 #include <opencv2/core.hpp>
 #include <string>
