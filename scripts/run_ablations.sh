@@ -26,7 +26,7 @@ while [[ $# -gt 0 ]]; do
   case "$1" in
     -o) out=$2; shift 2 ;;
     -s) setting=$2; shift 2 ;;
-    -h|--help) sed -n '2,19p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,18p' "$0"; exit 0 ;;
     --) shift; overrides=("$@"); break ;;
     *) rows+=("$1"); shift ;;
   esac
