@@ -13,6 +13,7 @@
 #include <iostream>
 #include <map>
 
+#include "core/config_io.hpp"
 #include "core/error.hpp"
 #include "core/files.hpp"
 #include "core/logging.hpp"
@@ -308,7 +309,48 @@ int guarded_main(const std::string& app_name, const std::function<int()>& body) 
   }
 }
 
+namespace {
+
+// CLI11 reads an integer as C does (strtoll with base 0: "010" is eight, "0x10" sixteen). Every
+// integer option of `cli` and its subcommands first goes through this transform, which keeps
+// decimal integers only and writes them without leading zeros ("010" is ten), and every number
+// option refuses hexadecimal ("0x1p3"). The type name CLI11 gives the option (INT, UINT, FLOAT)
+// tells them apart.
+void decimal_numbers_only(CLI::App& cli) {
+  for (CLI::Option* opt : cli.get_options()) {
+    const std::string type = opt->get_type_name();
+    const std::string base = type.substr(0, type.find(':'));
+    if (base == "INT" || base == "UINT") {
+      opt->transform(CLI::Validator(
+          [](std::string& text) -> std::string {
+            if (const auto v = config::decimal_integer(text)) {
+              text = std::to_string(*v);
+              return "";
+            }
+            try {
+              size_t used = 0;
+              std::stod(text, &used);
+              if (used == text.size()) return "'" + text + "' is not a decimal integer";
+            } catch (const std::exception&) {
+            }
+            return "'" + text + "' is not a number";
+          },
+          ""));
+    } else if (base == "FLOAT") {
+      opt->transform(CLI::Validator(
+          [](std::string& text) -> std::string {
+            return text.find_first_of("xX") == std::string::npos ? "" : "'" + text + "' is not a decimal number";
+          },
+          ""));
+    }
+  }
+  for (CLI::App* sub : cli.get_subcommands([](CLI::App*) { return true; })) decimal_numbers_only(*sub);
+}
+
+}  // namespace
+
 std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
+  decimal_numbers_only(cli);
   try {
     cli.parse(argc, argv);
     return std::nullopt;

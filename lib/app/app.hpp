@@ -113,7 +113,9 @@ int guarded_main(const std::string& app_name, const std::function<int()>& body);
 
 // Parses the command line. Returns the exit code when the program should stop now: 0 after
 // --help, 2 after a parse error (unknown flag, missing or invalid value), reported as one line
-// "<app>: error: ..." on stderr; nothing when the program goes on.
+// "<app>: error: ..." on stderr; nothing when the program goes on. Integers are decimal ("010"
+// is ten) and numbers are never hexadecimal, in every option of `cli` and its subcommands.
+// Every executable (apps/, bench/) parses its command line here.
 std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv);
 
 // "Model  6,922,244" style thousands separators.

@@ -57,10 +57,8 @@ RankRole rank_role(CommonOptions& options) {
 
 void share_cores(const RankRole& role, const RunContext& ctx) {
   if (!role.distributed || ctx.config.threads != 0) return;
-  const char* local = std::getenv("LOCAL_WORLD_SIZE");
-  const int ranks_here = local ? std::max(1, std::atoi(local)) : 1;
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
-  runtime::set_threads(std::max(1, cores / ranks_here));
+  runtime::set_threads(std::max(1, cores / dist::environment_from_env()->local_world_size));
 }
 
 std::shared_ptr<dist::Communicator> join_ranks(const RankRole& role, const RunContext& ctx) {

@@ -1,7 +1,10 @@
 #include "core/config_io.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <charconv>
 #include <fstream>
+#include <limits>
 #include <set>
 #include <sstream>
 
@@ -208,6 +211,19 @@ void write_yaml(const fs::path& file, const YAML::Node& tree) {
   fs::rename(tmp, file);
 }
 
+std::optional<int64_t> decimal_integer(const std::string& text) {
+  const char* begin = text.data();
+  const char* end = begin + text.size();
+  const bool plus = begin != end && *begin == '+';  // from_chars takes '-' only
+  if (plus) ++begin;
+  if (begin == end || !(std::isdigit(static_cast<unsigned char>(*begin)) || (*begin == '-' && !plus)))
+    return std::nullopt;
+  int64_t v = 0;
+  const auto [stop, ec] = std::from_chars(begin, end, v, 10);
+  if (ec != std::errc() || stop != end) return std::nullopt;
+  return v;
+}
+
 namespace detail {
 
 std::string join_path(const std::string& prefix, const std::string& key) {
@@ -224,9 +240,16 @@ void type_error(const std::string& path, const YAML::Node& node, const char* exp
 }
 
 bool scalar_to(const YAML::Node& node, bool& out) { return YAML::convert<bool>::decode(node, out); }
-bool scalar_to(const YAML::Node& node, int& out) { return YAML::convert<int>::decode(node, out); }
+bool scalar_to(const YAML::Node& node, int& out) {
+  const auto v = decimal_integer(node.Scalar());
+  if (!v || *v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max()) return false;
+  out = int(*v);
+  return true;
+}
 bool scalar_to(const YAML::Node& node, int64_t& out) {
-  return YAML::convert<int64_t>::decode(node, out);
+  const auto v = decimal_integer(node.Scalar());
+  if (v) out = *v;
+  return v.has_value();
 }
 bool scalar_to(const YAML::Node& node, double& out) {
   return YAML::convert<double>::decode(node, out);

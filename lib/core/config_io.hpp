@@ -28,6 +28,7 @@
 #include <filesystem>
 #include <initializer_list>
 #include <map>
+#include <optional>
 #include <set>
 #include <string>
 #include <type_traits>
@@ -44,6 +45,12 @@ namespace th::config {
 YAML::Node load_tree(const std::filesystem::path& file, const std::vector<std::string>& overrides);
 // Applies one `a.b.c=value` override in place. Throws naming the override if malformed.
 void apply_override(YAML::Node& root, const std::string& override_text);
+
+// An integer written in decimal: optional sign, digits only ("010" is ten; "0x10", "1e3" and
+// " 7" are not integers). Nothing when the text is not one or does not fit in 64 bits. Every
+// integer the project reads from a config, a split file or the command line goes through it
+// (yaml-cpp and CLI11 on their own would read "010" as octal eight).
+std::optional<int64_t> decimal_integer(const std::string& text);
 
 // An enum choice lists its YAML names once, found by argument-dependent lookup:
 //   enum class Coordinate { relative, absolute, none };

@@ -21,6 +21,7 @@
 #include <mutex>
 #include <thread>
 
+#include "core/config_io.hpp"
 #include "core/error.hpp"
 
 namespace th::dist {
@@ -29,12 +30,10 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 int env_int(const char* name, const char* value, int lo, int hi) {
-  char* end = nullptr;
-  errno = 0;
-  const long v = std::strtol(value, &end, 10);
-  if (errno || end == value || *end != '\0' || v < lo || v > hi)
+  const auto v = config::decimal_integer(value);
+  if (!v || *v < lo || *v > hi)
     fail("environment variable ", name, "='", value, "' must be an integer in [", lo, ", ", hi, "]");
-  return int(v);
+  return int(*v);
 }
 
 std::string message_of(const std::exception& e) {
@@ -63,6 +62,8 @@ std::optional<Environment> environment_from_env() {
   e.rank = env_int("RANK", rank, 0, e.world_size - 1);
   const char* local = std::getenv("LOCAL_RANK");
   e.local_rank = local ? env_int("LOCAL_RANK", local, 0, 1 << 20) : e.rank;
+  if (const char* ranks_here = std::getenv("LOCAL_WORLD_SIZE"))
+    e.local_world_size = env_int("LOCAL_WORLD_SIZE", ranks_here, 1, e.world_size);
   if (const char* addr = std::getenv("MASTER_ADDR")) {
     if (!*addr) fail("environment variable MASTER_ADDR is empty");
     e.master_addr = addr;

@@ -25,12 +25,13 @@ struct Environment {
   int rank = 0;
   int world_size = 1;
   int local_rank = 0;
+  int local_world_size = 1;  // ranks on this machine
   std::string master_addr = "127.0.0.1";
   int master_port = 29500;
 };
 
-// Reads RANK, WORLD_SIZE, LOCAL_RANK (default: RANK), MASTER_ADDR (default 127.0.0.1) and
-// MASTER_PORT (default 29500). nullopt when WORLD_SIZE is not set. Throws th::Error naming the
+// Reads RANK, WORLD_SIZE, LOCAL_RANK (default: RANK), LOCAL_WORLD_SIZE (default 1), MASTER_ADDR
+// (default 127.0.0.1) and MASTER_PORT (default 29500); numbers in decimal. nullopt when WORLD_SIZE is not set. Throws th::Error naming the
 // variable when a value is malformed or out of range.
 std::optional<Environment> environment_from_env();
 

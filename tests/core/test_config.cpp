@@ -96,6 +96,20 @@ TEST_CASE("a value of the wrong type fails naming key, expected type and value",
              Catch::Contains("'gpu' is not one of {auto, cpu, cuda}"));
 }
 
+TEST_CASE("integers are decimal: a leading zero is not octal, hexadecimal is refused", "[config]") {
+  CHECK(load<Config>("configs/default.yaml", {"eval.limit=010"}).eval.limit == 10);
+  CHECK(load<Config>("configs/default.yaml", {"eval.limit=+7"}).eval.limit == 7);
+  CHECK(load<Config>("configs/default.yaml", {"render.samples=0064"}).render.samples == 64);
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"eval.limit=0x10"}); }),
+             Catch::Contains("config key 'eval.limit' must be an integer, got '0x10'"));
+  CHECK_THAT(message_of([] { load<Config>("configs/default.yaml", {"eval.limit=99999999999"}); }),
+             Catch::Contains("config key 'eval.limit' must be an integer, got '99999999999'"));
+  CHECK(decimal_integer("-12") == -12);
+  CHECK(decimal_integer("0") == 0);
+  for (const char* text : {"", "+", "-", "+-1", " 7", "7 ", "1e3", "0x10", "0b1", "1.0", "99999999999999999999"})
+    CHECK_FALSE(decimal_integer(text).has_value());
+}
+
 TEST_CASE("incompatible switches are refused with a reason", "[config]") {
   CHECK_THAT(message_of([] {
                load<Config>("configs/default.yaml", {"model.fdi.appearance=false", "model.fdi.human=false"});

@@ -158,7 +158,8 @@ TEST_CASE("the workers of --nproc N run this program without it, in the run dire
 
 TEST_CASE("the launcher environment is read, and bad values are named", "[dist]") {
   auto set = [](const char* k, const char* v) { v ? ::setenv(k, v, 1) : ::unsetenv(k); };
-  for (const char* k : {"RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"}) set(k, nullptr);
+  const auto keys = {"RANK", "WORLD_SIZE", "LOCAL_RANK", "LOCAL_WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT"};
+  for (const char* k : keys) set(k, nullptr);
   CHECK_FALSE(th::dist::environment_from_env().has_value());
   set("WORLD_SIZE", "4");
   set("RANK", "3");
@@ -171,6 +172,17 @@ TEST_CASE("the launcher environment is read, and bad values are named", "[dist]"
   CHECK(e->local_rank == 3);
   CHECK(e->master_addr == "node17");
   CHECK(e->master_port == 29611);
+  CHECK(e->local_world_size == 1);
+  set("LOCAL_WORLD_SIZE", "02");  // decimal, as every integer
+  CHECK(th::dist::environment_from_env()->local_world_size == 2);
+  set("LOCAL_WORLD_SIZE", "abc");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(),
+                    Catch::Contains("environment variable LOCAL_WORLD_SIZE='abc' must be an integer in [1, 4]"));
+  set("LOCAL_WORLD_SIZE", "5");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("LOCAL_WORLD_SIZE='5'"));
+  set("LOCAL_WORLD_SIZE", nullptr);
+  set("RANK", " 3");
+  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK=' 3' must be an integer"));
   set("RANK", "4");
   CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK='4' must be an integer in [0, 3]"));
   set("RANK", "x1");
@@ -181,7 +193,7 @@ TEST_CASE("the launcher environment is read, and bad values are named", "[dist]"
   set("MASTER_PORT", "70000");
   CHECK_THROWS_WITH(th::dist::environment_from_env(), 
                     Catch::Contains("environment variable MASTER_PORT='70000' must be an integer in [1, 65535]"));
-  for (const char* k : {"RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT"}) set(k, nullptr);
+  for (const char* k : keys) set(k, nullptr);
   // NCCL is refused clearly where it cannot work.
   CHECK_THROWS_WITH(th::dist::resolve_backend("nccl", torch::kCPU), 
                     Catch::Contains("train.dist_backend=nccl but this LibTorch was built without NCCL") ||
