@@ -2,6 +2,12 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cstdio>
+#include <limits>
+#include <optional>
+#include <type_traits>
+
+#include "core/config_io.hpp"
 #include "core/error.hpp"
 #include "core/files.hpp"
 
@@ -25,11 +31,35 @@ YAML::Node load_settings(const std::filesystem::path& file) {
 template <class T>
 T get(const YAML::Node& node, const char* key, const std::string& where) {
   if (!node[key]) fail(where, ": missing '", key, "'");
-  try {
-    return node[key].as<T>();
-  } catch (const YAML::Exception&) {
-    fail(where, ": '", key, "' has the wrong type");
+  if constexpr (std::is_same_v<T, int>) {
+    // Decimal, as every integer of a config ("010" is ten, not yaml-cpp's octal eight).
+    const auto v = node[key].IsScalar() ? config::decimal_integer(node[key].Scalar()) : std::nullopt;
+    if (!v || *v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max())
+      fail(where, ": '", key, "' must be a decimal integer");
+    return int(*v);
+  } else {
+    try {
+      return node[key].as<T>();
+    } catch (const YAML::Exception&) {
+      fail(where, ": '", key, "' has the wrong type");
+    }
   }
+}
+
+// A person's name is a folder under the dataset root and a cell of per_image.csv: a control
+// character (a line break would split the CSV row and the log line) or a first character that
+// spreadsheets read as a formula (= + - @) is refused before any work.
+void check_person_name(const std::string& name, const std::string& where) {
+  for (const char c : name)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      char code[8];
+      std::snprintf(code, sizeof code, "0x%02x", static_cast<unsigned char>(c));
+      fail(where, ": the person's name holds a control character (", code, "); names are folder names without them");
+    }
+  if (name.empty()) fail(where, ": the person's name is empty");
+  if (std::string("=+-@").find(name.front()) != std::string::npos)
+    fail(where, ": the person's name '", name, "' starts with '", name.front(),
+         "', which spreadsheets read as a formula (per_image.csv); rename the folder");
 }
 
 // A view list: [i, ...], or the keyword (`random` / `all`) or an empty list for it.
@@ -39,10 +69,12 @@ bool read_views(const YAML::Node& node, const char* key, const char* keyword,
   if (!v) fail(where, ": missing '", key, "'");
   if (v.IsScalar() && v.Scalar() == keyword) return true;
   if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of camera indices or '", keyword, "'");
-  try {
-    views = v.as<std::vector<int>>();
-  } catch (const YAML::Exception&) {
-    fail(where, ": '", key, "' must be a list of camera indices");
+  views.clear();
+  for (const auto& item : v) {
+    const auto index = item.IsScalar() ? config::decimal_integer(item.Scalar()) : std::nullopt;
+    if (!index || *index < std::numeric_limits<int>::min() || *index > std::numeric_limits<int>::max())
+      fail(where, ": '", key, "' must be a list of camera indices (decimal integers)");
+    views.push_back(int(*index));
   }
   return views.empty();
 }
@@ -91,6 +123,7 @@ SplitSetting load_split(const std::filesystem::path& file, const std::string& na
       const char* name_key = humans[i]["human"] ? "human" : "name";
       HumanRange h{get<std::string>(humans[i], name_key, w), get<int>(humans[i], "begin", w),
                    get<int>(humans[i], "ni", w), get<int>(humans[i], "interval", w)};
+      check_person_name(h.name, w);
       if (h.begin < 0 || h.ni <= 0 || h.interval <= 0)
         fail(w, ": begin must be >= 0, ni and interval > 0");
       s.humans.push_back(h);

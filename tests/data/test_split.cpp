@@ -1,10 +1,12 @@
 #include <catch2/catch.hpp>
 
 #include <cstdio>
+#include <fstream>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "data/dataset.hpp"
+#include "data/split.hpp"
 #include "io/npy.hpp"
 #include "support/test_env.hpp"
 
@@ -98,4 +100,29 @@ TEST_CASE("an unknown setting or a missing human folder is named in the error", 
   write_annots(root, "CoreView_387", 30, 5);
   CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
                     Catch::Contains("view 7 does not exist for CoreView_387"));
+}
+
+TEST_CASE("split integers are decimal and person names hold no control character or formula", "[split]") {
+  const fs::path dir = th::test::scratch_dir("split_names");
+  auto split_with = [&](const std::string& human, const std::string& begin) {
+    const fs::path file = dir / "split.yaml";
+    std::ofstream(file) << "settings:\n  s:\n    reference_views: [0, 07]\n    target_views: [010]\n    humans:\n"
+                        << "      - {name: " << human << ", begin: " << begin << ", ni: 2, interval: 1}\n";
+    return file;
+  };
+  const auto s = th::data::load_split(split_with("CoreView_1", "010"), "s");
+  CHECK(s.humans.at(0).begin == 10);
+  CHECK(s.reference_views == std::vector<int>{0, 7});
+  CHECK(s.target_views == std::vector<int>{10});
+  CHECK_THROWS_WITH(th::data::load_split(split_with("CoreView_1", "0x10"), "s"),
+                    Catch::Contains("humans[0]: 'begin' must be a decimal integer"));
+  CHECK_THROWS_WITH(th::data::load_split(split_with("\"Core\\nView\"", "0"), "s"),
+                    Catch::Contains("split file '" + (dir / "split.yaml").string() + "', setting 's', humans[0]") &&
+                        Catch::Contains("holds a control character (0x0a)"));
+  CHECK_THROWS_WITH(th::data::load_split(split_with("\"Core\\tView\"", "0"), "s"),
+                    Catch::Contains("control character (0x09)"));
+  for (const char* formula : {"\"=cmd|' /C calc'!A0\"", "\"+1\"", "\"-1\"", "\"@SUM(1)\""})
+    CHECK_THROWS_WITH(th::data::load_split(split_with(formula, "0"), "s"),
+                      Catch::Contains("spreadsheets read as a formula"));
+  CHECK(th::data::load_split(split_with("\"Core,View \\\"1\\\"\"", "0"), "s").humans.at(0).name == "Core,View \"1\"");
 }
