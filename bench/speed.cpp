@@ -108,7 +108,7 @@ void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_s
   pipeline::load_weights(*net, setup.checkpoint, base.eval.model_mismatch == MismatchPolicy::warn);
   net->eval();
   net->set_products(model::resolve_products(base.precision, base.fp32_products, torch::kCPU));
-  pipeline::Tokens tokens(base.model.grouping, smpl->v_template);
+  pipeline::Tokens tokens(*net, smpl->v_template);
   const auto sample = dataset.load(0, 0);
   const auto inputs = pipeline::frame_inputs(sample, smpl->v_template, tokens.labels(sample.body), torch::kCPU);
   const auto rays = pipeline::sample_rays(sample, torch::kCPU);

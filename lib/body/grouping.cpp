@@ -5,6 +5,7 @@
 #include <limits>
 #include <random>
 
+#include "core/config_io.hpp"
 #include "core/error.hpp"
 #include "io/npy.hpp"
 
@@ -29,9 +30,8 @@ class CanonicalKMeans : public Grouping {
   explicit CanonicalKMeans(GroupingConfig c) : c_(std::move(c)) {}
   torch::Tensor labels(const torch::Tensor& canonical, const torch::Tensor&) override {
     if (!labels_.defined()) {
-      labels_ = c_.kmeans_file.empty()
-                    ? kmeans_cached(canonical, c_.num_tokens, c_.seed, c_.cache_dir)
-                    : load_reference_kmeans(c_.kmeans_file, canonical.size(0));
+      labels_ = uses_reference_kmeans(c_) ? load_reference_kmeans(c_.kmeans_file, canonical.size(0))
+                                          : kmeans_cached(canonical, c_.num_tokens, c_.seed, c_.cache_dir);
     }
     return labels_;
   }
@@ -133,10 +133,16 @@ torch::Tensor kmeans_cached(const torch::Tensor& points, int k, int64_t seed,
   spdlog::info("k-means: {} clusters of {} canonical vertices (cached in {})", k, x.size(0),
                file.string());
   auto labels = kmeans(x, k, seed);
+  // The cache only saves time (a run stores its labels in every checkpoint): a folder that cannot
+  // be written (a read-only checkout) costs the k-means again next time, nothing else.
   std::error_code ec;
   fs::create_directories(cache_dir, ec);
-  if (ec) fail("cannot create the k-means cache folder '", cache_dir.string(), "': ", ec.message());
-  io::write_npy(file, labels);
+  try {
+    if (ec) fail("cannot create the folder: ", ec.message());
+    io::write_npy(file, labels);
+  } catch (const Error& e) {
+    spdlog::warn("k-means labels not cached in '{}' ({}): model.grouping.cache_dir", cache_dir.string(), e.what());
+  }
   return labels;
 }
 
@@ -145,10 +151,40 @@ torch::Tensor load_reference_kmeans(const fs::path& file, int64_t num_vertices) 
   const io::Value* labels = v.find("pc2voxel_ind");
   if (!labels) fail("'", file.string(), "' has no 'pc2voxel_ind' (expected kmeans_dict_300.npy)");
   auto t = labels->as_tensor().to(torch::kInt64).reshape({-1});
-  if (t.numel() != num_vertices)
+  if (t.numel() == 0) fail("'", file.string(), "' has no labels in 'pc2voxel_ind'");
+  if (t.min().item<int64_t>() < 0) fail("'", file.string(), "' has negative labels in 'pc2voxel_ind'");
+  if (num_vertices >= 0 && t.numel() != num_vertices)
     fail("'", file.string(), "' labels ", t.numel(), " vertices, the body has ", num_vertices);
   // Compact to [0, clusters) in case some label is unused.
   return std::get<1>(torch::_unique(t, /*sorted=*/true, /*return_inverse=*/true));
+}
+
+bool uses_reference_kmeans(const GroupingConfig& c) {
+  return !c.kmeans_file.empty() && c.kmeans_file != kKMeansCompute;
+}
+
+std::string describe(const GroupingConfig& c) {
+  const std::string kind = config::name_of(c.kind);
+  switch (c.kind) {
+    case GroupingKind::canonical_kmeans:
+      if (uses_reference_kmeans(c)) return kind + " from the reference file " + c.kmeans_file;
+      return kind + " num_tokens=" + std::to_string(c.num_tokens) + " seed=" + std::to_string(c.seed);
+    case GroupingKind::canonical_grid: return kind + " num_tokens=" + std::to_string(c.num_tokens);
+    case GroupingKind::observation_grid:
+      return kind + " num_tokens=" + std::to_string(c.num_tokens) + " (per frame, from the posed body)";
+  }
+  return kind;
+}
+
+void check_labels(const torch::Tensor& labels, const std::string& source) {
+  if (labels.scalar_type() != torch::kInt64 || labels.dim() != 1 || labels.numel() == 0)
+    fail(source, ": token labels must be a non-empty 1-D int64 tensor, not ", labels.scalar_type(), " of shape ",
+         labels.sizes());
+  const int64_t lo = labels.min().item<int64_t>(), hi = labels.max().item<int64_t>();
+  if (lo < 0 || hi >= labels.numel())
+    fail(source, ": token labels run from ", lo, " to ", hi, " for ", labels.numel(), " vertices");
+  const int64_t empty = (torch::bincount(labels) == 0).sum().item<int64_t>();
+  if (empty > 0) fail(source, ": ", empty, " of the ", hi + 1, " tokens hold no vertex");
 }
 
 torch::Tensor grid_labels(const torch::Tensor& points, int target_cells) {

@@ -22,8 +22,20 @@ torch::Tensor kmeans(const torch::Tensor& points, int k, int64_t seed, int max_i
 torch::Tensor kmeans_cached(const torch::Tensor& points, int k, int64_t seed,
                             const std::filesystem::path& cache_dir);
 
-// The reference implementation's kmeans_dict_300.npy (pickled dict, `pc2voxel_ind` labels).
+// The reference implementation's kmeans_dict_300.npy (pickled dict, `pc2voxel_ind` labels),
+// compacted to [0, clusters). num_vertices < 0: the count is checked by the caller.
 torch::Tensor load_reference_kmeans(const std::filesystem::path& file, int64_t num_vertices);
+
+// Whether the config names a reference label file (kmeans_file set, and not "compute").
+bool uses_reference_kmeans(const GroupingConfig& config);
+
+// What makes a config's token groups, in words stored with a checkpoint's labels:
+// "canonical_kmeans num_tokens=300 seed=42", "reference file <path>", ...
+std::string describe(const GroupingConfig& config);
+
+// Fails, naming `source`, unless `labels` are token groups: (N) int64, N > 0, values in
+// [0, tokens) with every token holding at least one vertex.
+void check_labels(const torch::Tensor& labels, const std::string& source);
 
 // Grid voxelisation: labels of the non-empty cells of a cubic grid whose cell size is chosen
 // so that about `target_cells` cells are occupied (bisection on the cell size); labels are

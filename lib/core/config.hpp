@@ -97,10 +97,14 @@ struct EncoderConfig {
   bool fast_sampling = true;          // METHOD 3.1/9: sample low-res maps, no (V,384,H,W) tensor
 };
 
+// model.grouping.kmeans_file's value that imports a reference checkpoint with token groups computed
+// here instead of the reference's own (METHOD 8): its renders then differ from the reference's.
+inline constexpr const char* kKMeansCompute = "compute";
+
 struct GroupingConfig {
   GroupingKind kind = GroupingKind::canonical_kmeans;
   int num_tokens = 300;                   // Nt
-  std::string kmeans_file = "";           // reference kmeans_dict_300.npy (optional)
+  std::string kmeans_file = "";           // reference kmeans_dict_300.npy; "compute": see kKMeansCompute
   std::string cache_dir = "cache";        // k-means labels cached here, keyed by model and Nt
   int64_t seed = 0;
   MeanOver mean_over = MeanOver::all;     // all [parity] | visible

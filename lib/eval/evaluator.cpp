@@ -110,7 +110,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   model->set_products(model::select_products(config.precision, config.fp32_products, device));
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
   const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
-  pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
+  pipeline::Tokens tokens(*model, smpl->v_template);  // the checkpoint's token groups
 
   size_t n = dataset->size();
   if (config.eval.limit > 0) n = std::min(n, size_t(config.eval.limit));

@@ -21,9 +21,9 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   dataset_ = std::make_shared<const data::Dataset>(config.data, config.eval.setting,
                                                    data::Dataset::Mode::Test, smpl);
   canonical_ = smpl->v_template;  // float64: token positions [parity]
-  tokens_ = std::make_unique<pipeline::Tokens>(config.model.grouping, smpl->v_template);
   model_ = model::TransHuman(config.model);
   pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
+  tokens_ = std::make_unique<pipeline::Tokens>(*model_, smpl->v_template);  // the checkpoint's groups
   model_->to(device);
   model_->eval();
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));

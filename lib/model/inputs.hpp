@@ -5,6 +5,7 @@
 #include <torch/types.h>
 
 #include <cstdint>
+#include <string>
 
 namespace th::model {
 
@@ -27,6 +28,16 @@ struct FrameInputs {
   int64_t num_vertices() const { return vertices.size(0); }
   // Checks shapes and dtypes; TORCH_CHECK names the offending tensor.
   void check() const;
+};
+
+// The token groups a model's weights were trained with (METHOD 2.5): which token each body
+// vertex belongs to. They are part of the model like its weights: every checkpoint stores them,
+// and a loaded model renders with the stored labels, never with labels computed anew.
+struct TokenGroups {
+  torch::Tensor labels;  // (Nv) int64 on the CPU; undefined for a grouping made per frame
+  std::string origin;    // what made them, e.g. "canonical_kmeans num_tokens=300 seed=42"
+
+  bool empty() const { return origin.empty(); }
 };
 
 // Whether two frames' inputs are the same values (dtypes, shapes and every element): a frame

@@ -53,6 +53,10 @@ class TransHumanImpl : public torch::nn::Module {
   void set_products(const Products& products) { products_ = products; }
   const Products& products() const { return products_; }
   const ModelConfig& config() const { return config_; }
+  // The token groups of the weights (model/inputs.hpp): set when a checkpoint is loaded or when a
+  // run computes them at its start; empty before either.
+  const TokenGroups& token_groups() const { return token_groups_; }
+  void set_token_groups(TokenGroups groups) { token_groups_ = std::move(groups); }
 
   Encoder encoder{nullptr};
   std::shared_ptr<HumanRepresentation> human;  // undefined for the "w/o h" ablation
@@ -69,6 +73,7 @@ class TransHumanImpl : public torch::nn::Module {
   torch::Tensor color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs);
 
   ModelConfig config_;
+  TokenGroups token_groups_;
   Products products_;
   render::Profile* profile_ = nullptr;
   // The forms chosen at construction.

@@ -277,10 +277,12 @@ namespace {
 
 constexpr const char* kConfigKey = "model_config";
 
-// Model keys that do not change the function a checkpoint computes.
+// Model keys that do not change the function a checkpoint computes. The k-means file's path is
+// where the stored token labels came from on the machine that trained (the labels themselves are
+// in the checkpoint).
 bool compared(const std::string& key) {
-  return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" && key != "model.exact_shortcuts" &&
-         key != "model.readout_windows";
+  return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" &&
+         key != "model.grouping.kmeans_file" && key != "model.exact_shortcuts" && key != "model.readout_windows";
 }
 
 }  // namespace

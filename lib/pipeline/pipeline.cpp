@@ -1,5 +1,6 @@
 #include "pipeline/pipeline.hpp"
 
+#include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
 #include <chrono>
@@ -11,10 +12,30 @@
 
 namespace th::pipeline {
 
-Tokens::Tokens(const GroupingConfig& config, const torch::Tensor& canonical)
-    : grouping_(body::make_grouping(config)), canonical_(canonical.to(torch::kFloat64)) {}
+Tokens::Tokens(model::TransHumanImpl& model, const torch::Tensor& canonical)
+    : canonical_(canonical.to(torch::kCPU, torch::kFloat64)) {
+  const auto& config = model.config().grouping;
+  const auto& stored = model.token_groups();
+  if (stored.empty()) {
+    auto grouping = body::make_grouping(config);
+    if (grouping->is_static()) labels_ = grouping->labels(canonical_, canonical_);
+    else grouping_ = std::move(grouping);
+    model.set_token_groups({labels_, body::describe(config)});
+    spdlog::info("token groups: {}", body::describe(config));
+    return;
+  }
+  if (!stored.labels.defined()) {  // grouped per frame (read_token_groups checked the kind)
+    grouping_ = body::make_grouping(config);
+    return;
+  }
+  if (stored.labels.size(0) != canonical_.size(0))
+    fail("the model's token groups (", stored.origin, ") label ", stored.labels.size(0),
+         " vertices; the body model (data.smpl_model) has ", canonical_.size(0));
+  labels_ = stored.labels;
+}
 
 torch::Tensor Tokens::labels(const data::FrameBody& body) {
+  if (labels_.defined()) return labels_;
   return grouping_->labels(canonical_, body.smpl_vertices.to(torch::kFloat64));
 }
 

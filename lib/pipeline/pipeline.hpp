@@ -18,15 +18,20 @@
 
 namespace th::pipeline {
 
-// Token labels per frame from the configured grouping (static groupings compute once).
+// Token labels per frame (METHOD 2.5). A model that carries token groups (a loaded checkpoint)
+// renders with those. A model without them (a run's start; a checkpoint written before
+// checkpoints stored them; a reference import with model.grouping.kmeans_file "compute") gets
+// them here from its model.grouping: a static grouping's labels are computed once and stored in
+// the model, so every checkpoint written from it carries them. Fails when the stored labels do
+// not label the body model's vertices.
 class Tokens {
  public:
-  Tokens(const GroupingConfig& config, const torch::Tensor& canonical);
+  Tokens(model::TransHumanImpl& model, const torch::Tensor& canonical);
   torch::Tensor labels(const data::FrameBody& body);
 
  private:
-  std::unique_ptr<body::Grouping> grouping_;
-  torch::Tensor canonical_;
+  std::unique_ptr<body::Grouping> grouping_;  // per-frame groupings only
+  torch::Tensor canonical_, labels_;          // labels_: static groupings
 };
 
 // Sample -> FrameInputs on `device` (float32, except `canonical`, passed on in its own dtype:

@@ -180,13 +180,14 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   if (tc_.lpips_weight > 0) lpips_ = metrics::try_load_lpips(tc_.lpips_weights, device, "the perceptual loss");
 
   canonical_ = smpl->v_template;
-  tokens_ = std::make_unique<pipeline::Tokens>(config.model.grouping, smpl->v_template);
-
   if (options.resume && lead_) {
     last_ckpt_ = ckpt_dir_ / "latest.pt";
     st_ = pipeline::load_checkpoint(last_ckpt_, *model_, *optim_);
     spdlog::info("resumed from {} at epoch {}, step {}", last_ckpt_.string(), st_.epoch, st_.step);
   }
+  // The token groups: the resumed checkpoint's, or made now from model.grouping (the only place
+  // the k-means runs); the other ranks receive rank 0's with its state below.
+  if (lead_) tokens_ = std::make_unique<pipeline::Tokens>(*model_, canonical_);
   bn_stats_ = batchnorm_statistics(*model_);
   if (comm_ && tc_.sync_batchnorm) {
     dist::Communicator* comm = comm_;
@@ -197,6 +198,7 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   }
   if (comm_) {
     st_ = broadcast_state(*comm_, *model_, *optim_, st_);
+    if (!lead_) tokens_ = std::make_unique<pipeline::Tokens>(*model_, canonical_);
     spdlog::info("data-parallel training: {} ranks, global batch {} ({} backend)", procs_, world_,
                  comm_->backend());
   }

@@ -3,7 +3,11 @@
 #include <fstream>
 #include <sstream>
 
+#include "body/grouping.hpp"
+#include "body/smpl.hpp"
 #include "data/dataset.hpp"
+#include "model/transhuman.hpp"
+#include "pipeline/checkpoint.hpp"
 #include "eval/evaluator.hpp"
 #include "train/trainer.hpp"
 #include "support/test_env.hpp"
@@ -19,7 +23,49 @@ std::string read_all(const fs::path& p) {
   return ss.str();
 }
 
+// per_image.csv without its timing column (seconds): the rows that must not change.
+std::string scores_of(const fs::path& csv) {
+  std::stringstream in(read_all(csv)), out;
+  for (std::string line; std::getline(in, line);) {
+    std::stringstream cells(line);
+    int column = 0;
+    for (std::string cell; std::getline(cells, cell, ','); ++column)
+      if (column != 6) out << cell << ',';
+    out << '\n';
+  }
+  return out.str();
+}
+
 }  // namespace
+
+TEST_CASE("a checkpoint evaluates with its own token groups: no k-means cache, another seed", "[eval][tokens]") {
+  const auto root = th::test::tiny_dataset();
+  const fs::path run = th::test::scratch_dir("eval_token_groups");
+  auto config = [&](const fs::path& cache, std::vector<std::string> more) {
+    more.insert(more.end(), {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+                             "model.grouping.cache_dir=" + cache.string(), "train.val_views=0", "eval.limit=3"});
+    return th::config::load<th::Config>("tests/configs/tiny_train.yaml", more);
+  };
+  const auto c = config(run / "cache", {});
+  const auto trained = th::train::train(c, torch::kCPU, {run, false, 2});
+  th::eval::evaluate(c, torch::kCPU, trained.checkpoint, run / "eval_a");
+
+  // An empty cache and another seed: without warn, refused by name.
+  const fs::path empty_cache = run / "empty_cache";
+  const auto other = config(empty_cache, {"model.grouping.seed=5"});
+  CHECK_THROWS_WITH(th::eval::evaluate(other, torch::kCPU, trained.checkpoint, run / "eval_refused"),
+                    Catch::Contains("model.grouping.seed: checkpoint 0, config 5"));
+  // With warn: the checkpoint's groups, so the same rows; the k-means never ran.
+  const auto warned = config(empty_cache, {"model.grouping.seed=5", "eval.model_mismatch=warn"});
+  th::eval::evaluate(warned, torch::kCPU, trained.checkpoint, run / "eval_b");
+  CHECK(scores_of(run / "eval_a" / "per_image.csv") == scores_of(run / "eval_b" / "per_image.csv"));
+  CHECK_FALSE(fs::exists(empty_cache));
+  // Not vacuous: seed 5 groups this body otherwise than the checkpoint's groups.
+  th::model::TransHuman model(c.model);
+  th::pipeline::load_weights(*model, trained.checkpoint);
+  const auto canonical = th::data::load_body_model(c.data)->v_template;
+  CHECK_FALSE(torch::equal(th::body::kmeans(canonical, 24, 5), model->token_groups().labels));
+}
 
 TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs", "[eval]") {
   const auto root = th::test::tiny_dataset();

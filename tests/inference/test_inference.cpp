@@ -71,7 +71,7 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   model->eval();
   model->set_products(th::model::resolve_products(config.precision, config.fp32_products, torch::kCPU));
   const auto smpl = th::data::load_body_model(config.data);
-  th::pipeline::Tokens tokens(config.model.grouping, smpl->v_template);
+  th::pipeline::Tokens tokens(*model, smpl->v_template);
   const auto inputs = th::pipeline::frame_inputs(s, smpl->v_template,
                                               tokens.labels(s.body), torch::kCPU);
   // Token positions come from v_template in float64, as the reference's do (METHOD 3.2 [parity]).

@@ -15,6 +15,7 @@
 #include "support/test_env.hpp"
 #include "support/tiny_config.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/pipeline.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -271,4 +272,111 @@ TEST_CASE("a resumed run's optimiser state must be finite too", "[pipeline][chec
   out.save_to(latest.string());
   CHECK_THAT(error_of([&] { th::train::train(c, torch::kCPU, {run, true, 2}); }),
              Catch::Contains("optimiser state exp_avg") && Catch::Contains("NaN") && Catch::Contains("latest.pt"));
+}
+
+namespace {
+
+// Canonical points for a grouping of the tiny config (24 tokens): a seeded cloud.
+torch::Tensor cloud(int64_t n = 240) {
+  torch::manual_seed(11);
+  return torch::rand({n, 3}, torch::kFloat64);
+}
+
+// A training checkpoint of `model` (weights, config, token groups, Adam, position).
+void save_training_checkpoint(th::model::TransHumanImpl& model, const fs::path& file) {
+  torch::optim::Adam optim(model.parameters(), torch::optim::AdamOptions(1e-3));
+  th::pipeline::save_checkpoint(file, model, optim, {});
+}
+
+}  // namespace
+
+TEST_CASE("the token groups travel with every checkpoint and are used as stored", "[pipeline][checkpoint][tokens]") {
+  const fs::path dir = th::test::scratch_dir("ckcheck_tokens");
+  auto c = tiny_config();
+  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  auto a = make_model(c);
+  // A model without groups cannot be written: a run makes them first.
+  CHECK_THAT(error_of([&] { save_training_checkpoint(*a, dir / "none.pt"); }), Catch::Contains("no token groups"));
+  th::pipeline::Tokens made(*a, cloud());  // the run's start: k-means, stored in the model
+  const auto labels = a->token_groups().labels;
+  REQUIRE(labels.defined());
+  CHECK(a->token_groups().origin == "canonical_kmeans num_tokens=24 seed=0");
+  save_training_checkpoint(*a, dir / "a.pt");
+  th::pipeline::save_model_weights(*a, dir / "weights.pt");
+
+  // Read back with the k-means cache gone: the stored labels, no k-means run.
+  fs::remove_all(dir / "cache");
+  auto b = make_model(c);
+  th::pipeline::load_weights(*b, dir / "a.pt");
+  CHECK(torch::equal(b->token_groups().labels, labels));
+  CHECK(b->token_groups().origin == a->token_groups().origin);
+  th::pipeline::Tokens used(*b, cloud());
+  CHECK_FALSE(fs::exists(dir / "cache"));
+  auto w = make_model(c);
+  th::pipeline::load_model_weights(*w, dir / "weights.pt");
+  CHECK(torch::equal(w->token_groups().labels, labels));
+
+  // Another seed in the config: refused by name; with warn, the checkpoint's labels.
+  auto seeded = tiny_config({"model.grouping.seed=7"});
+  seeded.model.grouping.cache_dir = (dir / "cache").string();
+  auto s = make_model(seeded);
+  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*s, dir / "a.pt"); }),
+             Catch::Contains("model.grouping.seed: checkpoint 0, config 7"));
+  th::pipeline::load_weights(*s, dir / "a.pt", /*allow_model_mismatch=*/true);
+  th::pipeline::Tokens warned(*s, cloud());
+  CHECK(torch::equal(s->token_groups().labels, labels));
+  // Not vacuous: seed 7 groups the same points otherwise.
+  auto fresh = make_model(seeded);
+  th::pipeline::Tokens other(*fresh, cloud());
+  CHECK_FALSE(torch::equal(fresh->token_groups().labels, labels));
+
+  // Stored labels that do not fit the body model are refused, naming both counts.
+  auto small = make_model(c);
+  th::pipeline::load_weights(*small, dir / "a.pt");
+  CHECK_THAT(error_of([&] { th::pipeline::Tokens t(*small, cloud(100)); }),
+             Catch::Contains("label 240 vertices; the body model (data.smpl_model) has 100"));
+}
+
+TEST_CASE("a checkpoint written before checkpoints stored their groups loads, computing them", "[pipeline][checkpoint][tokens]") {
+  const fs::path dir = th::test::scratch_dir("ckcheck_tokens_old");
+  auto c = tiny_config();
+  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  auto a = make_model(c);
+  save_model_only(*a, dir / "old.pt", true);  // the layout before: no token_groups
+  auto b = make_model(c);
+  th::pipeline::load_weights(*b, dir / "old.pt");
+  CHECK(b->token_groups().empty());
+  th::pipeline::Tokens tokens(*b, cloud());
+  CHECK(b->token_groups().labels.defined());
+  CHECK(fs::exists(dir / "cache"));  // computed (and cached) as a run would
+}
+
+TEST_CASE("broken stored token groups are refused naming the file and the entry", "[pipeline][checkpoint][tokens]") {
+  const fs::path dir = th::test::scratch_dir("ckcheck_tokens_bad");
+  auto c = tiny_config();
+  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  auto a = make_model(c);
+  auto write = [&](const std::string& name, const c10::IValue& origin, const torch::Tensor& labels) {
+    torch::serialize::OutputArchive root, m;
+    a->save(m);
+    root.write("model", m);
+    th::pipeline::write_model_config(root, a->config());
+    root.write("token_groups", origin);
+    if (labels.defined()) root.write("token_labels", labels, true);
+    root.save_to((dir / name).string());
+    return dir / name;
+  };
+  const auto origin = c10::IValue(std::string("canonical_kmeans num_tokens=24 seed=0"));
+  auto load = [&](const fs::path& file) {
+    auto b = make_model(c);
+    return error_of([&] { th::pipeline::load_weights(*b, file); });
+  };
+  const auto range = write("range.pt", origin, torch::tensor({0, 1, 9}, torch::kInt64));
+  CHECK_THAT(load(range), Catch::Contains(range.string() + ": token_labels") && Catch::Contains("run from 0 to 9"));
+  CHECK_THAT(load(write("hole.pt", origin, torch::tensor({0, 2, 2}, torch::kInt64))),
+             Catch::Contains("1 of the 3 tokens hold no vertex"));
+  CHECK_THAT(load(write("float.pt", origin, torch::rand({5}))), Catch::Contains("1-D int64"));
+  CHECK_THAT(load(write("nolabels.pt", origin, {})), Catch::Contains("without their labels 'token_labels'"));
+  CHECK_THAT(load(write("perframe.pt", origin, torch::zeros({0}, torch::kInt64))),
+             Catch::Contains("grouped per frame") && Catch::Contains("model.grouping.kind is canonical_kmeans"));
 }

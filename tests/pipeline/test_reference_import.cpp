@@ -5,6 +5,7 @@
 
 #include <fstream>
 
+#include "body/grouping.hpp"
 #include "core/error.hpp"
 #include "io/npy.hpp"
 #include "model/pretrained.hpp"
@@ -114,6 +115,38 @@ TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[pipeline][che
                         Catch::Contains("], the model expects ["));
 }
 
+TEST_CASE("a reference .pth is loaded only with its token groups, or on an explicit 'compute'", "[pipeline][checkpoint][tokens]") {
+  const auto& dir = fixtures();
+  const auto groups = test::scratch_dir("checkpoint_import_groups");
+  REQUIRE(test::run_python("tests/python/kmeans_reference.py", groups.string() + " 690 300") == 0);
+  auto load = [&](const std::string& kmeans_file) {
+    ModelConfig c;
+    c.grouping.kmeans_file = kmeans_file;
+    c.grouping.cache_dir = (groups / "cache").string();
+    TransHuman model(c);
+    load_weights(*model, dir / "full.pth");
+    return model;
+  };
+  // No groups named: refused, naming the key and the reference's file.
+  try {
+    load("");
+    FAIL("a .pth without model.grouping.kmeans_file was loaded");
+  } catch (const Error& e) {
+    const std::string message = e.what();
+    CHECK_THAT(message, Catch::Contains((dir / "full.pth").string()) &&
+                            Catch::Contains("model.grouping.kmeans_file") &&
+                            Catch::Contains("kmeans_dict/kmeans_dict_300.npy") && Catch::Contains("'compute'"));
+  }
+  // The reference's file: its labels, as the reference reads them.
+  const auto with_file = load((groups / "kmeans_dict.npy").string());
+  CHECK(torch::equal(with_file->token_groups().labels, body::load_reference_kmeans(groups / "kmeans_dict.npy", 690)));
+  // The explicit opt-in: no groups yet, computed from model.grouping when a frame is first prepared.
+  auto computed = load("compute");
+  CHECK(computed->token_groups().empty());
+  Tokens tokens(*computed, torch::rand({690, 3}, torch::kFloat64));
+  CHECK(computed->token_groups().origin == "canonical_kmeans num_tokens=300 seed=0");
+}
+
 TEST_CASE("the full checkpoint's other entries are readable", "[pipeline][checkpoint]") {
   const auto all = read_torch_state_dict(fixtures() / "full.pth", "");
   CHECK(all.count("net.fc_0.weight"));
@@ -142,8 +175,10 @@ TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[pipeli
 TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip", "[pipeline][checkpoint]") {
   const auto dir = test::scratch_dir("checkpoint_own");
   TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());
+  a->set_token_groups({torch::tensor({0, 1, 1, 0}), "test groups"});
   save_model_weights(*a, dir / "model.pt");
   load_model_weights(*b, dir / "model.pt");
+  CHECK(torch::equal(b->token_groups().labels, a->token_groups().labels));
   for (const auto& p : a->named_parameters()) CHECK(torch::equal(p.value(), b->named_parameters()[p.key()]));
   // An npz with torchvision names (what scripts/export_pretrained.py writes).
   std::map<std::string, torch::Tensor> resnet;

@@ -50,7 +50,7 @@ struct Frames {
     const auto smpl = data::load_body_model(config.data);
     dataset = std::make_shared<const data::Dataset>(config.data, "identity", data::Dataset::Mode::Test, smpl);
     canonical = smpl->v_template;
-    tokens = std::make_unique<pipeline::Tokens>(config.model.grouping, smpl->v_template);
+    tokens = std::make_unique<pipeline::Tokens>(*model, smpl->v_template);
   }
   model::FrameInputs inputs(const data::Sample& s) {
     return pipeline::frame_inputs(s, canonical, tokens->labels(s.body), torch::kCPU);

@@ -151,7 +151,7 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
     torch::NoGradGuard g;
     model->heads->alpha_fc->bias.fill_(-100.0f);
   }
-  th::pipeline::Tokens tokens(c.model.grouping, smpl->v_template);
+  th::pipeline::Tokens tokens(*model, smpl->v_template);
   const fs::path dir = th::test::scratch_dir("train_collapse");
   th::pipeline::JsonlWriter log(dir / "metrics.jsonl");
   spdlog::default_logger()->sinks().push_back(sink);
