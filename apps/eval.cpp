@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (limit >= 0) options.overrides.push_back("eval.limit=" + std::to_string(limit));
     th::app::apply_model_options(model, options);
+    options.scoring = true;
 
     if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-eval", "runs/eval"))
       return *code;

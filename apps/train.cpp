@@ -30,6 +30,7 @@ int main(int argc, char** argv) {
     if (resume && options.out.empty()) th::fail("--resume needs --out (the run directory to continue)");
     if (resume && options.force) th::fail("--resume continues the run in --out, --force replaces it: not both");
     options.resume = resume;
+    options.training = true;
 
     if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-train", "runs/train"))
       return *code;

@@ -116,7 +116,8 @@ Inputs config_inputs(const Config& c, const std::string& config_file) {
             {"the body model (data.smpl_model)", c.data.smpl_model},
             {"the visibility files (data.visibility_root)", c.data.visibility_root},
             {"the encoder weights (model.encoder.pretrained)", c.model.encoder.pretrained},
-            {"the k-means file (model.grouping.kmeans_file)", c.model.grouping.kmeans_file},
+            {"the k-means file (model.grouping.kmeans_file)",
+             c.model.grouping.kmeans_file == kKMeansCompute ? std::string() : c.model.grouping.kmeans_file},
             {"the LPIPS weights (train.lpips_weights)", c.train.lpips_weights},
             {"the LPIPS weights (eval.lpips_weights)", c.eval.lpips_weights}};
   return in;
@@ -229,6 +230,35 @@ void apply_model_options(const ModelOptions& m, CommonOptions& options) {
   if (!options.dry_run && m.checkpoint.empty()) fail("--checkpoint is required");
 }
 
+namespace {
+
+// The weight files a config names are made once by a script: a missing one stops the command
+// before it starts, with the command that makes it. Empty keys are the documented "off" (checked
+// where used).
+void require_weight_files(Config& c, bool training, bool scoring) {
+  auto require = [](const std::string& key, const std::string& file, const std::string& make,
+                    const std::string& off) {
+    std::error_code ec;
+    if (file.empty() || fs::is_regular_file(file, ec)) return;
+    fail(key, ": '", file, "' does not exist: make it once with `", make, " --out ", file,
+         "` (docs/USAGE.md, \"Real data\"), or set ", key, ": \"\" (", off, ")");
+  };
+  const std::string lpips =
+      "python3 scripts/export_lpips.py --vgg vgg16-397923af.pth --lin <lpips repository>/lpips/weights/v0.1/vgg.pth";
+  if (training) {
+    require("model.encoder.pretrained", c.model.encoder.pretrained,
+            "python3 scripts/export_pretrained.py --torchvision", "the encoder then starts from random weights");
+    if (c.train.lpips_weight > 0)
+      require("train.lpips_weights", c.train.lpips_weights, lpips, "the perceptual loss term is then off");
+  } else if (!c.model.encoder.pretrained.empty()) {
+    spdlog::debug("model.encoder.pretrained not read: the checkpoint holds the encoder's weights");
+    c.model.encoder.pretrained.clear();
+  }
+  if (scoring) require("eval.lpips_weights", c.eval.lpips_weights, lpips, "LPIPS is then not reported");
+}
+
+}  // namespace
+
 RunContext start_run(const CommonOptions& o, const std::string& app_name,
                      const std::string& default_out) {
   logging::init_console(o.verbose);
@@ -243,6 +273,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   ctx.resolved = config::load_tree(o.config, overrides);
   ctx.config = config::from_tree<Config>(ctx.resolved);
   ctx.resolved = config::to_tree(ctx.config);  // every field, defaults included
+  require_weight_files(ctx.config, o.training, o.scoring);
   // What can still refuse the run (TH_MALLOC, threads, the device) is checked before the run
   // folder is touched, so that a corrected rerun is not refused by a folder a failed one wrote.
   const bool own_malloc = runtime::keep_freed_memory();

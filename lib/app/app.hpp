@@ -29,6 +29,11 @@ struct CommonOptions {
   // (continue the run there; the model section of its config.yaml must be unchanged).
   bool guard_out = false;
   bool force = false;
+  // The command trains (transhuman-train): model.encoder.pretrained is read. Every other command
+  // takes the encoder's weights from its checkpoint and does not read that file.
+  bool training = false;
+  // The command scores views (transhuman-eval): eval.lpips_weights is read.
+  bool scoring = false;
   bool resume = false;
   // What the command writes into --out, as entry names ("frames", "*.ply"): render and mesh
   // continue in a folder holding only these; anything else makes --out another command's

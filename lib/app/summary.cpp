@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "body/grouping.hpp"
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/runtime.hpp"
@@ -61,6 +62,19 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
                "LPIPS weight {}",
                c.train.epochs, c.train.iters_per_epoch, c.train.lr, c.train.warmup_epochs,
                c.train.min_lr, c.train.grad_clip, c.train.lpips_weight);
+  spdlog::info("  a step: one target image, {} patches of {} x {} rays, {} samples per ray", c.data.patch.count,
+               c.data.patch.size, c.data.patch.size, c.render.samples);
+  // The files the config needs besides the data (start_run has refused a missing one).
+  auto file = [](const std::string& path, const std::string& empty) {
+    return path.empty() ? empty : "'" + path + "'";
+  };
+  const auto& g = m.grouping;
+  spdlog::info("files: body model {} | encoder start {} | LPIPS weights: training {}, evaluation {}",
+               file(c.data.smpl_model, "'<data.root>/smpl_model.npz'"),
+               file(m.encoder.pretrained, "random (model.encoder.pretrained empty)"),
+               c.train.lpips_weight > 0 ? file(c.train.lpips_weights, "none (term off)") : "term off (weight 0)",
+               file(c.eval.lpips_weights, "none (LPIPS not reported)"));
+  spdlog::info("token groups: {}; a checkpoint carries its own", body::describe(g));
 }
 
 }  // namespace th::app
