@@ -10,6 +10,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "app/app.hpp"
 #include "core/runtime.hpp"
 
 namespace {
@@ -32,13 +33,13 @@ double time_case(const Case& c, int reps) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App cli{"BLAS throughput on TransHuman's matrix shapes"};
   int threads = 0;
   std::string out;
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
   cli.add_option("--out", out, "append the figures to this file");
-  CLI11_PARSE(cli, argc, argv);
+  if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
   th::runtime::set_threads(threads);
   torch::NoGradGuard no_grad;
   torch::manual_seed(0);
@@ -66,4 +67,8 @@ int main(int argc, char** argv) {
   std::cout << report.str();
   if (!out.empty()) std::ofstream(out, std::ios::app) << report.str() << "\n";
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return th::app::guarded_main("transhuman-bench-blas", [&] { return run(argc, argv); });
 }

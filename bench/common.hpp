@@ -10,6 +10,7 @@
 
 #include <chrono>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <memory>
@@ -17,6 +18,7 @@
 #include <iostream>
 #include <string>
 
+#include "core/error.hpp"
 #include "core/torch_compat.hpp"
 
 namespace th::bench {
@@ -69,6 +71,15 @@ struct PeakMemory {
   double rss_mib() const { return (status_kb("VmHWM:") - base_kb) / 1024.0; }
   std::string text() const { return fmt(tensor_mib(), 0) + " MiB tensors (RSS +" + fmt(rss_mib(), 0) + " MiB)"; }
 };
+
+// A benchmark that writes its figures over `out` (not appending) refuses an existing file unless
+// `force`: the results kept in bench/results/ are replaced only on purpose. Checked before
+// anything is measured. Throws th::Error.
+inline void refuse_overwriting(const std::filesystem::path& out, bool force) {
+  std::error_code ec;
+  if (out.empty() || force || !std::filesystem::exists(std::filesystem::symlink_status(out, ec))) return;
+  th::fail("--out '", out.string(), "' exists: --force to replace it, or --out another file");
+}
 
 // Lines printed and kept for the markdown file.
 struct Report {

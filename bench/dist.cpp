@@ -2,7 +2,7 @@
 // with 2 processes (--nproc 2) on the same configuration, the gradient all-reduce time per step
 // of those runs, and the all-reduce of the paper model's gradients (default config) between 2
 // processes over loopback Gloo.
-//   transhuman-bench-dist --data DIR [--config FILE] [--steps N] [--out FILE]
+//   transhuman-bench-dist --data DIR [--config FILE] [--steps N] [--out FILE] [--force]
 // DIR: a synthetic dataset (transhuman-synth; e.g. build/test_tmp/synth_tiny). Timings exclude
 // the first `--warmup` steps of each run (start-up, first allocations).
 #include <CLI/CLI.hpp>
@@ -19,7 +19,10 @@
 #include <sstream>
 #include <thread>
 
+#include "app/app.hpp"
+#include "common.hpp"
 #include "core/error.hpp"
+#include "core/process.hpp"
 #include "dist/communicator.hpp"
 #include "dist/launcher.hpp"
 #include "model/transhuman.hpp"
@@ -34,8 +37,6 @@ std::string fmt(double v, int prec = 2) {
   s << std::fixed << std::setprecision(prec) << v;
   return s.str();
 }
-
-std::string quote(const std::string& s) { return "'" + s + "'"; }
 
 double field(const std::string& line, const std::string& key) {
   const auto k = "\"" + key + "\": ";
@@ -53,15 +54,16 @@ struct RunFigures {
 RunFigures train_run(const std::string& exe, const std::string& label, const std::vector<std::string>& extra, const std::string& config,
                      const fs::path& data, const fs::path& out, int steps, int warmup) {
   fs::remove_all(out);
-  std::string cmd = quote(exe) + " --config " + quote(config) + " --out " + quote(out.string()) +
-                    " --max-steps " + std::to_string(steps);
-  for (const auto& e : extra) cmd += " " + e;
-  cmd += " data.root=" + quote(data.string()) + " data.split_file=" + quote((data / "split.yaml").string()) +
-         " model.grouping.cache_dir=" + quote((data.parent_path() / "kmeans_cache").string()) +
-         " train.val_views=0 train.log_every_steps=1 train.epochs=1000 > " + quote(out.string() + ".log") + " 2>&1";
+  std::vector<std::string> args{exe, "--config", config, "--out", out.string(), "--max-steps", std::to_string(steps)};
+  args.insert(args.end(), extra.begin(), extra.end());
+  for (const std::string& o : {"data.root=" + data.string(), "data.split_file=" + (data / "split.yaml").string(),
+                               "model.grouping.cache_dir=" + (data.parent_path() / "kmeans_cache").string(),
+                               std::string("train.val_views=0"), std::string("train.log_every_steps=1"),
+                               std::string("train.epochs=1000")})
+    args.push_back(o);
   std::cout << label << ": " << std::flush;
   const auto t0 = Clock::now();
-  const int rc = std::system(cmd.c_str());
+  const int rc = th::run_program(args, out.string() + ".log");
   RunFigures f;
   f.wall_s = std::chrono::duration<double>(Clock::now() - t0).count();
   if (rc != 0) th::fail(label, " failed (", rc, "); see ", out.string(), ".log");
@@ -113,32 +115,34 @@ int allreduce_worker(int reps, const std::string& result) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return th::app::guarded_main("transhuman-bench-dist", [&]() -> int {
     CLI::App cli{"Data-parallel training benchmark"};
     std::string data, config = "tests/configs/tiny_train.yaml", out = "bench/results/dist.md", result;
     int steps = 20, warmup = 3, reps = 10;
     // Built next to this program: build/bench/.. -> build/apps/transhuman-train.
     std::string train_exe =
         (fs::path(th::dist::self_executable()).parent_path().parent_path() / "apps" / "transhuman-train").string();
-    bool worker = false;
+    bool worker = false, force = false;
     cli.add_option("--data", data, "synthetic dataset folder (e.g. build/test_tmp/synth_tiny)");
     cli.add_option("--config", config, "training config")->capture_default_str();
     cli.add_option("--steps", steps, "training steps per run")->capture_default_str();
     cli.add_option("--warmup", warmup, "steps left out of the timings")->capture_default_str();
     cli.add_option("--reps", reps, "all-reduce repetitions")->capture_default_str();
-    cli.add_option("--out", out, "write the figures to this file (markdown)");
+    cli.add_option("--out", out, "write the figures to this file (markdown; empty: print only)")->capture_default_str();
+    cli.add_flag("--force", force, "replace --out when it exists");
     cli.add_option("--train-exe", train_exe, "transhuman-train to run")->capture_default_str();
     cli.add_flag("--allreduce-worker", worker)->group("");
     cli.add_option("--result", result)->group("");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     if (worker) return allreduce_worker(reps, result);
     if (data.empty() || !fs::is_directory(data)) th::fail("--data '", data, "' is not a folder");
+    th::bench::refuse_overwriting(out, force);
 
     const fs::path tmp = fs::temp_directory_path() / "transhuman_bench_dist";
     fs::create_directories(tmp);
-    const auto one1 = train_run(train_exe, "1 process, 1 thread", {"--threads 1"}, config, data, tmp / "p1t1", steps, warmup);
-    const auto one2 = train_run(train_exe, "1 process, 2 threads", {"--threads 2"}, config, data, tmp / "p1t2", steps, warmup);
-    const auto two = train_run(train_exe, "2 processes, 1 thread each", {"--nproc 2", "--threads 1"}, config, data, tmp / "p2",
+    const auto one1 = train_run(train_exe, "1 process, 1 thread", {"--threads", "1"}, config, data, tmp / "p1t1", steps, warmup);
+    const auto one2 = train_run(train_exe, "1 process, 2 threads", {"--threads", "2"}, config, data, tmp / "p1t2", steps, warmup);
+    const auto two = train_run(train_exe, "2 processes, 1 thread each", {"--nproc", "2", "--threads", "1"}, config, data, tmp / "p2",
                                steps, warmup);
 
     std::cout << "all-reduce of the default model's gradients, 2 processes: " << std::flush;
@@ -184,8 +188,5 @@ int main(int argc, char** argv) {
       std::cout << "written to " << out << std::endl;
     }
     return 0;
-  } catch (const std::exception& e) {
-    std::cerr << "transhuman-bench-dist: error: " << e.what() << std::endl;
-    return 2;
-  }
+  });
 }

@@ -11,6 +11,7 @@
 #include <iostream>
 #include <sstream>
 
+#include "app/app.hpp"
 #include "io/pickle.hpp"
 
 namespace {
@@ -28,13 +29,13 @@ double best_seconds(int runs, F&& f) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App cli{"Pickle reader throughput on SMPL's posedirs"};
   int runs = 5;
   std::string out = "bench/results/io.md";
   cli.add_option("--runs", runs, "timed runs (the best is reported)")->check(CLI::Range(1, 1000));
   cli.add_option("--out", out, "append the figures to this file (empty: print only)");
-  CLI11_PARSE(cli, argc, argv);
+  if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
 
   using th::io::Value;
   const auto posedirs = torch::arange(6890 * 3 * 207, torch::kDouble).reshape({6890, 3, 207});
@@ -62,4 +63,8 @@ int main(int argc, char** argv) {
   std::cout << report.str();
   if (!out.empty()) std::ofstream(out, std::ios::app) << report.str() << "\n";
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return th::app::guarded_main("transhuman-bench-io", [&] { return run(argc, argv); });
 }

@@ -24,7 +24,7 @@ int main(int argc, char** argv) {
     th::app::add_common_options(cli, options);
     cli.add_option("--samples", samples, "samples per measurement");
     cli.add_option("--results", out, "append the figures to this markdown file");
-    CLI11_PARSE(cli, argc, argv);
+    if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     const auto ctx = th::app::start_run(options, "transhuman-bench-loader");
     const auto& data = ctx.config.data;
 

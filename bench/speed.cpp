@@ -37,9 +37,11 @@
 #include <map>
 #include <thread>
 
+#include "app/app.hpp"
 #include "body/smpl.hpp"
 #include "common.hpp"
 #include "core/config_io.hpp"
+#include "core/process.hpp"
 #include "core/runtime.hpp"
 #include "data/dataset.hpp"
 #include "eval/evaluator.hpp"
@@ -340,15 +342,9 @@ void section_head(bench::Report& r, const std::string& section, const Setup& set
   }
 }
 
-std::string quote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App cli{"TransHuman speed benchmark: several paths side by side (exact, blas, fp32, bf16, default)"};
   Setup setup;
   int threads = 0, orbit_views = 36, train_steps = 10;
@@ -362,22 +358,22 @@ int main(int argc, char** argv) {
   cli.add_option("--config", setup.config, "the config (the checkpoint's)")->required();
   cli.add_option("--checkpoint", setup.checkpoint, "a trained checkpoint")->required();
   cli.add_option("--out", out, "append the figures to this markdown file (empty: print only)");
-  cli.add_option("--sections", sections, "which parts to run: view orbit train eval");
+  cli.add_option("--sections", sections, "which parts to run: view orbit train eval")
+      ->check(CLI::IsMember({"view", "orbit", "train", "eval"}));
   cli.add_option("--view-samples", view_samples, "samples per ray of the view section");
   cli.add_option("--orbit-views", orbit_views, "orbit views");
   cli.add_option("--train-steps", train_steps, "training steps measured (after as many of warm-up)");
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
   cli.add_option("--scratch", setup.scratch, "scratch folder (default: a temporary one, removed at the end)");
-  cli.add_option("--paths", paths, "paths side by side; the first is the reference: exact blas fp32 bf16 auto default");
+  cli.add_option("--paths", paths, "paths side by side; the first is the reference: exact blas fp32 bf16 auto default")
+      ->check(CLI::IsMember({"exact", "blas", "fp32", "bf16", "auto", "default"}));
   cli.add_option("--repeat", repeat, "rounds of all paths, alternating")->check(CLI::Range(1, 10));
   cli.add_flag("--eval-images", eval_images, "evaluation saves its images, compared with the reference path's");
   cli.add_option("--child", child_path, "(internal) run one path of the sections");
   cli.add_option("--reference", setup.reference, "(internal) the reference path");
   cli.add_option("--rows", rows_file, "(internal) where a child writes its rows");
   cli.add_option("overrides", setup.overrides, "config overrides key=value");
-  CLI11_PARSE(cli, argc, argv);
-
-  for (const auto& p : paths) path_overrides(p);  // an unknown path fails here
+  if (const auto rc = app::parse_command_line(cli, argc, argv)) return *rc;
   if (!child_path.empty()) {  // one path, in a process of its own
     setup.path = child_path;
     if (child_path != "exact") runtime::keep_freed_memory();  // as the apps do; exact: glibc defaults
@@ -429,19 +425,18 @@ int main(int argc, char** argv) {
     for (int round = 0; round < repeat; ++round)
     for (const auto& path : paths) {
       const fs::path file = setup.scratch / (section + "_" + path + "_" + std::to_string(round) + ".rows");
-      std::string cmd = quote(fs::read_symlink("/proc/self/exe").string()) + " --child " + path + " --reference " +
-                        quote(paths.front()) + " --rows " +
-                        quote(file.string()) + " --config " + quote(setup.config.string()) + " --checkpoint " +
-                        quote(setup.checkpoint.string()) + " --scratch " + quote(setup.scratch.string()) +
-                        " --sections " + section + " --orbit-views " + std::to_string(orbit_views) +
-                        " --train-steps " + std::to_string(train_steps) + " --threads " + std::to_string(threads) +
-                        " --view-samples";
-      for (int v : view_samples) cmd += " " + std::to_string(v);
-      if (eval_images) cmd += " --eval-images";
-      cmd += " --";
-      for (const auto& o : setup.overrides) cmd += " " + quote(o);
+      std::vector<std::string> args{fs::read_symlink("/proc/self/exe").string(), "--child", path, "--reference",
+                                    paths.front(), "--rows", file.string(), "--config", setup.config.string(),
+                                    "--checkpoint", setup.checkpoint.string(), "--scratch", setup.scratch.string(),
+                                    "--sections", section, "--orbit-views", std::to_string(orbit_views),
+                                    "--train-steps", std::to_string(train_steps), "--threads", std::to_string(threads),
+                                    "--view-samples"};
+      for (int v : view_samples) args.push_back(std::to_string(v));
+      if (eval_images) args.push_back("--eval-images");
+      args.push_back("--");
+      args.insert(args.end(), setup.overrides.begin(), setup.overrides.end());
       std::cout << "[" << section << ", " << path << ", round " << round + 1 << "]" << std::endl;
-      if (std::system(cmd.c_str()) != 0) {
+      if (run_program(args) != 0) {
         std::cerr << "transhuman-bench-speed: the " << path << " run of section " << section << " failed" << std::endl;
         if (own_scratch) fs::remove_all(setup.scratch);
         return 1;
@@ -477,4 +472,8 @@ int main(int argc, char** argv) {
     std::cout << "appended to " << out.string() << std::endl;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return app::guarded_main("transhuman-bench-speed", [&] { return run(argc, argv); });
 }
