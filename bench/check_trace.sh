@@ -25,7 +25,7 @@ fi
 grep -q "aten::mm: before" "$work/compare.txt" || { cat "$work/compare.txt" >&2; exit 1; }
 # A trace that cannot be written is an error naming the file, not a silent skip.
 if "$bench" --quick --threads 1 --sections points --chunks 1024 --rounds 0 --trace "$work/no/such/dir/t.json" \
-    --out "$work/model.md" >"$work/unwritable.log" 2>&1; then
+    --out "$work/model.md" --force >"$work/unwritable.log" 2>&1; then
   echo "an unwritable --trace file was accepted" >&2
   exit 1
 fi

@@ -2,7 +2,7 @@
 // several chunk sizes, one training step on the default ray batch, and one 512 x 512 frame
 // rendered progressively, for 64 and 16 samples per ray. Synthetic inputs (random images, a
 // humanoid point body of 6890 vertices, 300 tokens); random weights.
-//   transhuman-bench-model [--threads N] [--out FILE] [--quick] [--precision fp32-blas fp32 bf16 ...]
+//   transhuman-bench-model [--threads N] [--out FILE [--force]] [--quick] [--precision fp32-blas fp32 bf16 ...]
 // Each precision path (model/precision.hpp: fp32-blas = fp32 products through BLAS, fp32 = the
 // config default's fp32 products, bf16, auto) is measured in turn inside every round, so that
 // the paths see the same machine state.
@@ -23,7 +23,10 @@
 #include <sstream>
 #include <thread>
 
+#include "app/app.hpp"
 #include "common.hpp"
+#include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
 #include "model/transhuman.hpp"
@@ -35,6 +38,7 @@ using bench::Clock;
 using bench::fmt;
 using bench::PeakMemory;
 using bench::seconds_since;
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -180,14 +184,15 @@ void shares(Report& r, const render::Profile& p, double total) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App cli{"TransHuman model and renderer benchmark"};
   int threads = 0;
   std::string out = "bench/results/model.md";
-  bool quick = false;
+  bool quick = false, force = false;
   std::vector<int64_t> chunks{1024, 2048, 4096, 8192, 16384, 32768, 65536};
   cli.add_option("--threads", threads, "LibTorch threads (0: one per core)");
-  cli.add_option("--out", out, "write the figures to this file (markdown)");
+  cli.add_option("--out", out, "write the figures to this file (markdown; empty: print only)")->capture_default_str();
+  cli.add_flag("--force", force, "replace --out when it exists");
   cli.add_option("--chunks", chunks, "chunk sizes for the per-point figures");
   int rounds = 3;
   cli.add_option("--rounds", rounds, "rounds of per-point measurements (best of)");
@@ -205,7 +210,20 @@ int main(int argc, char** argv) {
                  "write a Chrome trace of three forward+backward calls and one training-path call to this file");
   bool system_malloc = false;
   cli.add_flag("--system-malloc", system_malloc, "keep glibc's default mmap use for large blocks");
-  CLI11_PARSE(cli, argc, argv);
+  if (const auto rc = app::parse_command_line(cli, argc, argv)) return *rc;
+  bench::refuse_overwriting(out, force);
+  // The trace goes to a new file or over a regular one, never through a link or into a device.
+  bool trace_existed = false;
+  if (!trace.empty()) {
+    std::error_code ec;
+    auto type = fs::symlink_status(trace, ec).type();
+    if (ec) type = fs::file_type::not_found;  // an unreadable folder: the write below reports it
+    trace_existed = type != fs::file_type::not_found;
+    if (type == fs::file_type::symlink)
+      fail("--trace '", trace, "' is a symbolic link: the trace is written to a new or a regular file only");
+    if (trace_existed && type != fs::file_type::regular)
+      fail("--trace '", trace, "' is a ", file_kind(type), ": the trace is written to a new or a regular file only");
+  }
   // Per-chunk tensors are tens of MB: glibc would map and unmap them every time (page faults
   // dominate the system time). Serve them from the heap and keep it.
   if (!system_malloc) {
@@ -353,9 +371,10 @@ int main(int argc, char** argv) {
       const std::string text((std::istreambuf_iterator<char>(written)), std::istreambuf_iterator<char>());
       const auto last = text.find_last_not_of(" \n");
       if (last == std::string::npos || text[last] != ']') {
-        std::remove(trace.c_str());
-        std::cerr << "transhuman-bench-model: the trace file '" << trace
-                  << "' was not written completely (disk full?); the partial file is removed" << std::endl;
+        // Only a file this run made is removed.
+        if (!trace_existed) std::remove(trace.c_str());
+        std::cerr << "transhuman-bench-model: the trace file '" << trace << "' was not written completely (disk full?); "
+                  << (trace_existed ? "it is left as it is" : "the partial file is removed") << std::endl;
         return 1;
       }
       auto ms_per_call = [](int calls, auto&& fn) {
@@ -540,4 +559,8 @@ int main(int argc, char** argv) {
     std::cout << "written to " << out << std::endl;
   }
   return 0;
+}
+
+int main(int argc, char** argv) {
+  return app::guarded_main("transhuman-bench-model", [&] { return run(argc, argv); });
 }
