@@ -6,7 +6,8 @@
 Prints, per operator name, how often each trace calls it and the time spent in it, the operators
 whose call counts differ, and the N operators with the most time. Exits 1 when the two traces do
 not call the same operators the same number of times (the two builds compute differently), 0 when
-they do (any difference in time is then the machine's or the code around the operators).
+they do (any difference in time is then the machine's or the code around the operators), and 2,
+with one line on stderr, when a file cannot be read or is not such a trace.
 """
 import argparse
 import collections
@@ -14,20 +15,35 @@ import json
 import sys
 
 
+def fail(message):
+    """One line on stderr and exit status 2 (1 means: the traces differ)."""
+    print(f"compare-traces: error: {message}", file=sys.stderr)
+    sys.exit(2)
+
+
 def load(path):
     try:
-        with open(path) as f:
+        with open(path, encoding="utf-8") as f:
             data = json.load(f)
-    except (OSError, json.JSONDecodeError) as e:
-        sys.exit(f"compare-traces: cannot read {path}: {e}")
-    events = data["traceEvents"] if isinstance(data, dict) else data
+    except OSError as e:
+        fail(f"cannot read '{path}': {e.strerror or e}")
+    except (ValueError, RecursionError) as e:  # not JSON, not UTF-8, nested too deep
+        fail(f"'{path}' is not JSON: {str(e).splitlines()[0] if str(e) else type(e).__name__}")
+    events = data.get("traceEvents") if isinstance(data, dict) else data
+    if not isinstance(events, list):
+        fail(f"'{path}' is not a Chrome trace (a list of events, or an object with 'traceEvents')")
     calls, micros = collections.Counter(), collections.Counter()
-    for e in events:
-        if e.get("ph") == "X":
-            calls[e["name"]] += 1
-            micros[e["name"]] += float(e.get("dur", 0))
+    for i, e in enumerate(events):
+        if not isinstance(e, dict) or e.get("ph") != "X":
+            continue
+        try:
+            name, dur = str(e["name"]), float(e.get("dur", 0))
+        except (KeyError, TypeError, ValueError):
+            fail(f"'{path}': event {i} is a complete ('X') event without a name or with a duration that is not a number")
+        calls[name] += 1
+        micros[name] += dur
     if not calls:
-        sys.exit(f"compare-traces: {path} has no complete ('X') events")
+        fail(f"'{path}' has no complete ('X') events")
     return calls, micros
 
 

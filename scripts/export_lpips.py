@@ -9,6 +9,8 @@ Run once, where torchvision's VGG16 ImageNet weights and the LPIPS v0.1 linear l
 --vgg: torchvision's vgg16 state dict (default: torchvision's cache, if the weights are there).
 --lin: the lpips package's weights/v0.1/vgg.pth (keys lin{0..4}.model.1.weight).
 --random-seed N: random weights instead (tests: VGG16 init of torchvision + uniform lin layers).
+Both files are read as weights only (scripts/weights_file.py): a file that holds anything but
+tensors is refused with one line and exit status 2, and nothing of it is run.
 Also usable as a module: reference_lpips() is the plain formula the C++ test compares against.
 """
 import argparse
@@ -16,6 +18,8 @@ import argparse
 import numpy as np
 import torch
 import torchvision
+
+from weights_file import fail, load_weights
 
 CONV_INDICES = [0, 2, 5, 7, 10, 12, 14, 17, 19, 21, 24, 26, 28]
 SLICE_ENDS = [4, 9, 16, 23, 30]  # features[:4] -> relu1_2, ..., features[23:30] -> relu5_3
@@ -28,13 +32,23 @@ def build(vgg_path=None, lin_path=None, random_seed=None):
         vgg = torchvision.models.vgg16(weights=None)
         lins = [torch.rand(1, c, 1, 1) for c in CHANNELS]
     else:
+        lin_state = load_weights(lin_path, "--lin")
+        keys = [f"lin{i}.model.1.weight" for i in range(5)]
+        if not isinstance(lin_state, dict) or any(not isinstance(lin_state.get(k), torch.Tensor) for k in keys):
+            fail(f"--lin '{lin_path}' is not the LPIPS v0.1 vgg.pth: it needs the tensors {', '.join(keys)}")
+        lins = [lin_state[k] for k in keys]
         if vgg_path:
             vgg = torchvision.models.vgg16(weights=None)
-            vgg.load_state_dict(torch.load(vgg_path, map_location="cpu"))
+            state = load_weights(vgg_path, "--vgg")
+            try:
+                vgg.load_state_dict(state)
+            except (RuntimeError, TypeError, AttributeError) as e:
+                fail(f"--vgg '{vgg_path}' is not torchvision's vgg16 state dict: {str(e).strip().splitlines()[0]}")
         else:
-            vgg = torchvision.models.vgg16(weights=torchvision.models.VGG16_Weights.IMAGENET1K_V1)
-        lin_state = torch.load(lin_path, map_location="cpu")
-        lins = [lin_state[f"lin{i}.model.1.weight"] for i in range(5)]
+            try:
+                vgg = torchvision.models.vgg16(weights=torchvision.models.VGG16_Weights.IMAGENET1K_V1)
+            except Exception as e:  # noqa: BLE001: no network, no cache
+                fail(f"cannot get torchvision's VGG16 weights (give them with --vgg): {str(e).strip().splitlines()[0]}")
     return vgg.features.eval(), lins
 
 
@@ -74,7 +88,10 @@ def main():
     if args.random_seed is None and not args.lin:
         p.error("--lin (the LPIPS v0.1 vgg.pth) is required unless --random-seed is given")
     features, lins = build(args.vgg, args.lin, args.random_seed)
-    export(features, lins, args.out)
+    try:
+        export(features, lins, args.out)
+    except OSError as e:
+        fail(f"cannot write --out '{args.out}': {e.strerror or e}")
     print(f"wrote {args.out}")
 
 
