@@ -495,6 +495,130 @@ check "render --dry-run --path <missing>" 2 "camera path file '$work/missing.yam
 check "mesh --dry-run --view 99" 2 "camera 99 out of range" \
   "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --view 99
 
+# ---- 10. numbers are decimal, names are names, the helper programs run no shell -------------------
+# check_out NAME FRAGMENT COMMAND...: succeeds, and a line of its output (stdout or stderr) holds
+# FRAGMENT.
+check_out() {
+  local name=$1 fragment=$2 out rc line ok=ok
+  shift 2
+  out=$(timeout 120 "$@" 2>&1)
+  rc=$?
+  line=$(printf '%s\n' "$out" | grep -F -- "$fragment" | tail -1)
+  [[ $rc -eq 0 && -n $line ]] || { ok=FAIL; failures=$((failures + 1)); echo "FAIL: $name: exit $rc" >&2; }
+  line=${line//$work/…}
+  rows+=("| $name | 0 | $rc | - | ${line//|/\\|} | $ok |")
+}
+# absent NAME PATH: PATH was not made (a row of its own).
+absent() {
+  if [[ -e $2 ]]; then rows+=("| $1 | - | - | - | ${2//$work/…} exists | FAIL |"); failures=$((failures + 1))
+  else rows+=("| $1 | - | - | - | not there | ok |"); fi
+}
+# rows_of CSV: the data rows of an evaluation's per_image.csv.
+rows_of() { echo $(($(wc -l <"$1") - 1)); }
+for how in "--limit 010" "eval.limit=010"; do
+  "${evaluate[@]}" $(on "$data") --out "$work/e_limit" --force $how >/dev/null 2>&1
+  n=$(rows_of "$work/e_limit/per_image.csv" 2>/dev/null || echo 0)
+  if [[ $n == 10 ]]; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+  rows+=("| eval $how: ten images, not octal eight | 0 | - | - | per_image.csv holds $n rows | $ok |")
+done
+check "render --dry-run --camera 0100 (decimal 100, not octal 64)" 2 "camera 100 out of range" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --camera 0100
+check "mesh --dry-run --view 0100" 2 "camera 100 out of range" \
+  "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --view 0100
+check "view --port 0100000 (octal would be 32768)" 2 "--port: must be in [1, 65535], not 100000" \
+  "$apps/transhuman-view" --port 0100000
+check "train --threads 0x10" 2 "--threads: '0x10' is not a decimal integer" "$apps/transhuman-train" --threads 0x10
+check "eval --limit 1e3" 2 "--limit: '1e3' is not a decimal integer" "$apps/transhuman-eval" --limit 1e3
+check "mesh --voxel 0x1p-8 (a hexadecimal number)" 2 "--voxel: '0x1p-8' is not a decimal number" \
+  "$apps/transhuman-mesh" --voxel 0x1p-8
+check "config eval.limit=0x10" 2 "config key 'eval.limit' must be an integer, got '0x10'" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run eval.limit=0x10
+check_out "train --dry-run render.samples=010" "render: 10 samples/ray" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run render.samples=010
+WORLD_SIZE=1 RANK=0 LOCAL_WORLD_SIZE=abc check "LOCAL_WORLD_SIZE=abc" 2 \
+  "environment variable LOCAL_WORLD_SIZE='abc' must be an integer in [1, 1]" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run
+WORLD_SIZE=1 RANK=0 LOCAL_WORLD_SIZE=1 check_ok "... LOCAL_WORLD_SIZE=1" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run
+# A person renamed (folder and split file): NAME as the split file spells it.
+rename_person() {
+  "$py" - "$1" "$2" <<'EOF2'
+import json, os, sys
+root, name = sys.argv[1:3]
+split = open(root + '/split.yaml').read().replace('name: CoreView_s03,', 'name: ' + json.dumps(name) + ',')
+open(root + '/split.yaml', 'w').write(split)
+os.rename(root + '/CoreView_s03', root + '/' + name)
+EOF2
+}
+d=$(copy name_newline) && rename_person "$d" $'CoreView\ns03'
+check "a line break in a person's name" 2 "humans[0]: the person's name holds a control character (0x0a)" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_name_nl"
+absent "  ... no per_image.csv written" "$work/e_name_nl/per_image.csv"
+d=$(copy name_formula) && rename_person "$d" "=cmd|' /C calc'!A0"
+check "a spreadsheet formula as a person's name" 2 "the person's name '=cmd|' /C calc'!A0' starts with '='" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_name_formula"
+d=$(copy name_at) && rename_person "$d" "@SUM(1)"
+check "a name starting with @" 2 "the person's name '@SUM(1)' starts with '@'" \
+  "${evaluate[@]}" $(on "$d") --out "$work/e_name_at"
+d=$(copy name_comma) && rename_person "$d" 'Core,View "s03"'
+check_out "a comma and quotes inside a name (quoted in per_image.csv)" '"Core,View ""s03"""' \
+  sh -c '"$@" >/dev/null 2>&1 && cat "$0/per_image.csv"' "$work/e_name_comma" "${evaluate[@]}" $(on "$d") --out "$work/e_name_comma"
+
+# The benchmarks and scripts.
+bench=$(cd "$apps/../bench" 2>/dev/null && pwd)
+if [[ -x $bench/transhuman-bench-dist ]]; then
+  mkdir -p "$work/q';touch pwned;'"
+  check "bench-dist --data with shell code in the name" 2 "1 process, 1 thread failed (1)" \
+    env TMPDIR="$work" sh -c 'cd "$0" && exec "$@"' "$work" "$bench/transhuman-bench-dist" --data "q';touch pwned;'" \
+    --train-exe /bin/false --steps 1 --warmup 0 --out "$work/dist.md"
+  absent "  ... the shell code did not run" "$work/pwned"
+  check "bench-speed --sections with shell code" 2 "--sections: " \
+    env TMPDIR="$work" sh -c 'cd "$0" && exec "$@"' "$work" "$bench/transhuman-bench-speed" --config "$work/run/config.yaml" \
+    --checkpoint "$ckpt" --sections 'view;touch pwned'
+  absent "  ... the shell code did not run" "$work/pwned"
+  check "bench-blas --bogus (was exit 109)" 2 "transhuman-bench-blas: error: The following argument was not expected: --bogus" \
+    "$bench/transhuman-bench-blas" --bogus
+  check "bench-io --runs 0 (was exit 105)" 2 "transhuman-bench-io: error: --runs: " "$bench/transhuman-bench-io" --runs 0
+  check "bench-loader --samples 0x10" 2 "--samples: '0x10' is not a decimal integer" "$bench/transhuman-bench-loader" --samples 0x10
+  check "bench-speed without --config (was exit 106)" 2 "--config is required" "$bench/transhuman-bench-speed" --checkpoint x
+  check "bench-dist --steps ten" 2 "--steps: 'ten' is not a number" "$bench/transhuman-bench-dist" --steps ten
+  model_md=$(sum_of bench/results/model.md)
+  check "bench-model without --out (the checkout's bench/results/model.md)" 2 \
+    "--out 'bench/results/model.md' exists: --force to replace it, or --out another file" \
+    "$bench/transhuman-bench-model" --quick --sections points --rounds 0
+  if [[ $(sum_of bench/results/model.md) == "$model_md" ]]; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+  rows+=("| ... bench/results/model.md unchanged | - | - | - | md5 $model_md | $ok |")
+  mkfifo "$work/trace_fifo" && ln -s "$work/run/config.yaml" "$work/trace_link"
+  check "bench-model --trace <a FIFO>" 2 "--trace '$work/trace_fifo' is a FIFO (named pipe): the trace is written to a new or a regular file only" \
+    "$bench/transhuman-bench-model" --quick --out "$work/model.md" --trace "$work/trace_fifo"
+  check "bench-model --trace <a link>" 2 "--trace '$work/trace_link' is a symbolic link" \
+    "$bench/transhuman-bench-model" --quick --out "$work/model.md" --trace "$work/trace_link"
+  kept "  ... the FIFO, the link and its target" "$work/trace_fifo" "$work/trace_link" "$work/run/config.yaml"
+else
+  rows+=("| the benchmarks (build/bench) | - | - | - | skipped: not built | skip |")
+fi
+"$py" - "$work" <<'EOF2'
+import os, sys, torch
+class Code:
+    def __reduce__(self):
+        return (os.system, ("touch " + sys.argv[1] + "/unpickled",))
+torch.save({"lin0.model.1.weight": Code()}, sys.argv[1] + "/code.pth")
+EOF2
+check "export_lpips.py --lin <a pickle that runs code>" 2 "--lin '$work/code.pth' is not a weights file: it names posix.system" \
+  "$py" scripts/export_lpips.py --lin "$work/code.pth" --out "$work/lpips.npz"
+check "export_pretrained.py --weights <the same>" 2 "--weights '$work/code.pth' is not a weights file: it names posix.system" \
+  "$py" scripts/export_pretrained.py --weights "$work/code.pth" --out "$work/resnet.npz"
+absent "  ... the pickle's code did not run" "$work/unpickled"
+check "export_lpips.py --lin <a text file>" 2 "is not a weights file: it is neither a torch zip archive nor a pickle" \
+  "$py" scripts/export_lpips.py --lin "$work/run/config.yaml" --out "$work/lpips.npz"
+echo '[{"ph": "X", "name": "aten::mm", "dur": 1}]' >"$work/trace.json"
+check "compare-traces.py <missing file> (was exit 1, as 'differ')" 2 "compare-traces: error: cannot read '$work/nowhere.json'" \
+  "$py" scripts/compare-traces.py "$work/trace.json" "$work/nowhere.json"
+check "compare-traces.py <a config, not a trace>" 2 "compare-traces: error: '$work/run/config.yaml' is not JSON" \
+  "$py" scripts/compare-traces.py "$work/trace.json" "$work/run/config.yaml"
+check_out "compare-traces.py <a trace> <itself>" "the same operators" \
+  "$py" scripts/compare-traces.py "$work/trace.json" "$work/trace.json"
+
 table=$(
   echo "| case | expected exit | exit | seconds | last stderr line | |"
   echo "|---|---|---|---|---|---|"
