@@ -3,12 +3,15 @@
 // dragged with the mouse and the person re-renders from there.
 #include <spdlog/spdlog.h>
 
+#include <poll.h>
+#include <unistd.h>
+
 #include <atomic>
+#include <chrono>
 #include <csignal>
+#include <cstdio>
 #include <iostream>
 #include <thread>
-
-#include <unistd.h>
 
 #include "app/app.hpp"
 #include "core/error.hpp"
@@ -17,9 +20,11 @@
 
 namespace {
 
-// Ctrl-C and SIGTERM: a handler (whichever thread receives them) writes the signal's number to a
-// pipe; one thread reads it. Before the server listens that ends the process (the viewer writes
-// nothing); afterwards it stops the server, which ends main cleanly.
+// SIGINT, SIGTERM and SIGHUP: a handler (whichever thread receives them) writes the signal's
+// number to a pipe; one thread reads it. Before the server listens that ends the process (the
+// viewer writes nothing); afterwards it stops the server (the render in flight is cancelled,
+// connections close) and main returns 0. Should that take more than a second and a half, or a
+// second signal come, the process ends at once.
 std::atomic<th::viewer::Server*> g_server{nullptr};
 int g_signal_pipe[2] = {-1, -1};
 
@@ -36,14 +41,22 @@ void stop_on_signals() {
     }
     th::viewer::Server* server = g_server.load();
     if (!server) std::_Exit(128 + sig);
+    const auto start = std::chrono::steady_clock::now();
     spdlog::info("viewer: signal {}, stopping", int(sig));
     server->stop();
+    pollfd again{g_signal_pipe[0], POLLIN, 0};
+    if (::poll(&again, 1, 1500) > 0 || g_server.load()) {
+      const auto ms =
+          std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start).count();
+      spdlog::warn("viewer: still stopping {} ms after the signal; ending now", ms);
+      std::fflush(nullptr);
+      std::_Exit(0);
+    }
   }).detach();
   struct sigaction action {};
   action.sa_handler = on_stop_signal;
   sigemptyset(&action.sa_mask);
-  sigaction(SIGINT, &action, nullptr);
-  sigaction(SIGTERM, &action, nullptr);
+  for (const int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &action, nullptr);
 }
 
 }  // namespace
@@ -63,13 +76,23 @@ int main(int argc, char** argv) {
     cli.add_option("--human", human, "the person shown first (folder name); default: the setting's first");
     cli.add_option("--frame", o.start_frame, "the body frame shown first (annots index); default: the person's first test frame")
         ->check(th::app::at_least(0));
-    cli.add_option("--host", o.host, "address to listen on (default 127.0.0.1: this machine only)");
-    cli.add_option("--port", o.port, "port")->check(th::app::in_range(1, 65535));
+    cli.add_option("--host", o.host,
+                   "address to listen on (default 127.0.0.1: this machine only; '' or 0.0.0.0: every IPv4 "
+                   "interface, '::': every interface)");
+    cli.add_option("--port", o.port, "port (refused when another program listens on it)")
+        ->check(th::app::in_range(1, 65535));
+    cli.add_option("--allow-host", o.allow_hosts,
+                   "a name the browser may reach the viewer by, beside 127.0.0.1, localhost, [::1] and the "
+                   "--host address (requests naming another Host are refused); repeatable")
+        ->allow_extra_args(false);
+    cli.add_option("--render-timeout", o.render_timeout_s, "longest one render may run, seconds (then 503)")
+        ->check(th::app::in_range(1, 3600));
     cli.add_option("--view", o.view, "camera whose image size the first view takes (METHOD 7: 3)")
         ->check(th::app::at_least(0));
     cli.add_option("--max-size", o.max_size, "largest image side a request may ask for")
         ->check(th::app::in_range(16, 4096));
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
+    for (const auto& name : o.allow_hosts) th::viewer::allowed_host(name);
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-view");
@@ -84,7 +107,9 @@ int main(int argc, char** argv) {
 
     th::viewer::Server server(session, o);
     g_server = &server;
-    std::cout << "transhuman-view: open " << server.url() << " in a browser (Ctrl-C stops)" << std::endl;
+    std::cout << "transhuman-view: open " << server.url() << " in a browser (Ctrl-C stops)\n"
+              << "transhuman-view: listening on " << server.interfaces() << "; answering to " << server.host_names()
+              << std::endl;
     server.run();
     g_server = nullptr;
     return 0;

@@ -7,14 +7,23 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <sstream>
 
 #include "core/error.hpp"
 #include "report/report.hpp"
+#include "viewer/access.hpp"
+#include "viewer/listener.hpp"
 #include "viewer/page.hpp"
 
 namespace th::viewer {
@@ -24,9 +33,19 @@ using inference::Session;
 
 namespace {
 
-// A request parameter that is not what it must be: answered with 400 and this message.
-struct BadRequest {
+using Clock = std::chrono::steady_clock;
+
+// A request answered with an error: its status, a message naming the cause, and Retry-After
+// seconds when trying again later may succeed.
+struct HttpError {
+  int status = 500;
   std::string message;
+  int retry_after_s = 0;
+};
+
+// A request parameter that is not what it must be: answered with 400 and this message.
+struct BadRequest : HttpError {
+  explicit BadRequest(std::string text) : HttpError{400, std::move(text)} {}
 };
 
 std::string param(const httplib::Request& req, const std::string& name) {
@@ -114,10 +133,13 @@ std::string png(const torch::Tensor& image) {
   return std::string(bytes.begin(), bytes.end());
 }
 
+// Why a render or a wait for the renderer ends early: nullopt while it may go on.
+using Interruption = std::function<std::optional<HttpError>()>;
+
 class Viewer {
  public:
-  Viewer(const Session& session, int view, int max_size, int start_human, int start_frame)
-      : session_(session), view_(view), max_size_(max_size), start_human_(start_human), start_frame_(start_frame) {}
+  Viewer(const Session& session, const Options& options, const std::atomic<bool>& stopping)
+      : session_(session), options_(options), stopping_(stopping) {}
 
   std::string info() const {
     std::ostringstream out;
@@ -131,26 +153,28 @@ class Viewer {
       out << "]}";
     }
     const auto& c = session_.config();
-    out << "],\"samples\":" << c.render.samples << ",\"max_size\":" << max_size_ << ",\"view\":" << view_
-        << ",\"max_samples\":4096,\"start\":{\"human\":" << start_human_ << ",\"frame\":" << start_frame_ << "}}";
+    out << "],\"samples\":" << c.render.samples << ",\"max_size\":" << options_.max_size
+        << ",\"view\":" << options_.view << ",\"max_samples\":" << kMaxSamples
+        << ",\"render_timeout_s\":" << options_.render_timeout_s
+        << ",\"start\":{\"human\":" << options_.start_human << ",\"frame\":" << options_.start_frame << "}}";
     return out.str();
   }
 
+  // Data only (no network): answers while a render runs.
   std::string frame_json(const httplib::Request& req) {
     const auto [h, f] = person_frame(req);
-    std::lock_guard<std::mutex> lock(prepare_mutex_);
-    const PreparedFrame& prepared = prepared_frame(h, f);
+    const auto frame = frame_data(h, f);
     std::ostringstream out;
     out << "{\"center\":" << json_vec(session_.body_center(h, f)) << ",\"references\":"
-        << prepared.sample.reference_views.size() << ",\"cameras\":[";
+        << frame->sample.reference_views.size() << ",\"cameras\":[";
     for (int c = 0; c < session_.human(h).num_cameras(); ++c) {
-      const auto cam = session_.dataset_camera(prepared, c);
+      const auto cam = session_.dataset_camera(*frame, c);
       const auto R = cam.R, eye = -torch::mv(R.t(), cam.T.flatten());
-      const double height = double(prepared.sample.target_image.size(0));
+      const double height = double(frame->sample.target_image.size(0));
       const double fy = cam.K[1][1].item<double>();
       out << (c ? "," : "") << "{\"eye\":" << json_vec(eye) << ",\"forward\":" << json_vec(R[2])
           << ",\"up\":" << json_vec(-R[1]) << ",\"fovy\":" << 2.0 * std::atan(0.5 * height / fy) * 180.0 / M_PI
-          << ",\"width\":" << prepared.sample.target_image.size(1) << ",\"height\":" << height << "}";
+          << ",\"width\":" << frame->sample.target_image.size(1) << ",\"height\":" << height << "}";
     }
     out << "]}";
     return out.str();
@@ -158,19 +182,17 @@ class Viewer {
 
   std::string reference(const httplib::Request& req) {
     const auto [h, f] = person_frame(req);
-    std::lock_guard<std::mutex> lock(prepare_mutex_);
-    const PreparedFrame& prepared = prepared_frame(h, f);
-    const int count = int(prepared.sample.ref_images.size(0));
+    const auto frame = frame_data(h, f);
+    const int count = int(frame->sample.ref_images.size(0));
     const int i = int_param(req, "index", 0, count - 1);
-    return png(prepared.sample.ref_images[i].permute({1, 2, 0}));
+    return png(frame->sample.ref_images[i].permute({1, 2, 0}));
   }
 
   // Dataset camera C of a frame scored as transhuman-eval scores it, with its ground truth.
-  std::string evaluate(const httplib::Request& req) {
+  std::string evaluate(const httplib::Request& req, const std::function<bool()>& client_gone) {
     const auto [h, f] = person_frame(req);
     const int c = int_param(req, "camera", 0, session_.human(h).num_cameras() - 1);
-    std::unique_lock<std::timed_mutex> lock(render_mutex_, std::defer_lock);
-    if (!lock.try_lock_for(std::chrono::seconds(60))) throw BadRequest{"busy: another render has run for a minute"};
+    const auto lock = render_lock([&] { return stopped_or_gone(client_gone); });
     const auto r = session_.evaluate_view(h, f, c);
     std::ostringstream out;
     out.precision(10);
@@ -187,14 +209,15 @@ class Viewer {
     return png(sample.target_image * sample.box_mask.unsqueeze(-1).to(torch::kFloat32));
   }
 
-  // nullopt: cancelled by a newer request.
-  std::optional<std::string> render(const httplib::Request& req) {
+  // A PNG, or HttpError: 409 when a newer request of the same page took over, 503 when the
+  // viewer stops, the render runs past its time bound or the renderer stays busy.
+  std::string render(const httplib::Request& req, const std::function<bool()>& client_gone) {
     const auto [h, f] = person_frame(req);
     // camera=C: dataset camera C exactly (K, R, T and image size), as transhuman-render --camera.
     const int snap = req.has_param("camera") ? int_param(req, "camera", 0, session_.human(h).num_cameras() - 1) : -1;
-    const int width = snap >= 0 ? 0 : int_param(req, "width", 8, max_size_);
-    const int height = snap >= 0 ? 0 : int_param(req, "height", 8, max_size_);
-    const int samples = req.has_param("samples") ? int_param(req, "samples", 2, 4096) : 0;
+    const int width = snap >= 0 ? 0 : int_param(req, "width", 8, options_.max_size);
+    const int height = snap >= 0 ? 0 : int_param(req, "height", 8, options_.max_size);
+    const int samples = req.has_param("samples") ? int_param(req, "samples", 2, kMaxSamples) : 0;
     const std::string mode = req.has_param("mode") ? req.get_param_value("mode") : "rgb";
     if (mode != "rgb" && mode != "depth" && mode != "acc")
       throw BadRequest{"'mode' = '" + mode + "' must be rgb, depth or acc"};
@@ -214,29 +237,42 @@ class Viewer {
       uint64_t& latest = latest_[client];
       latest = std::max(latest, seq);
     }
-    const auto stale = [this, client, seq] {
+    const Interruption interrupted = [this, client, seq, &client_gone]() -> std::optional<HttpError> {
+      if (auto e = stopped_or_gone(client_gone)) return e;
       std::lock_guard<std::mutex> lock(latest_mutex_);
       const auto it = latest_.find(client);
-      return it != latest_.end() && seq < it->second;
+      if (it != latest_.end() && seq < it->second) return HttpError{409, "cancelled by a newer request"};
+      return std::nullopt;
     };
-    // One render at a time, bounded waiting.
-    std::unique_lock<std::timed_mutex> lock(render_mutex_, std::defer_lock);
-    if (!lock.try_lock_for(std::chrono::seconds(60))) throw BadRequest{"busy: another render has run for a minute"};
-    if (stale()) return std::nullopt;
-    std::lock_guard<std::mutex> prep(prepare_mutex_);
-    const PreparedFrame& prepared = prepared_frame(h, f);
+    const auto lock = render_lock(interrupted);
+    const auto started = Clock::now();
+    const auto prepared = prepared_frame(h, f);
     int w = width, hh = height;
     if (snap >= 0) {
-      camera = session_.dataset_camera(prepared, snap);
-      w = int(prepared.sample.target_image.size(1));
-      hh = int(prepared.sample.target_image.size(0));
+      camera = session_.dataset_camera(*prepared, snap);
+      w = int(prepared->sample.target_image.size(1));
+      hh = int(prepared->sample.target_image.size(0));
     }
     Session::ViewControl control;
     control.samples = samples;
-    control.band_pixels = 4096;  // cancellation is polled between bands
-    control.cancelled = stale;
-    const auto images = session_.render_view(prepared, camera, w, hh, control);
-    if (!images) return std::nullopt;
+    // Cancellation is polled between bands: about kBandSamples samples each (whole rows).
+    const int per_ray = samples > 0 ? samples : session_.config().render.samples;
+    control.band_pixels = std::max<int64_t>(1, kBandSamples / std::max(per_ray, 1));
+    std::optional<HttpError> stopped;
+    control.cancelled = [&] {
+      stopped = interrupted();
+      if (!stopped && Clock::now() - started > std::chrono::seconds(options_.render_timeout_s))
+        stopped = HttpError{503, "the render ran past the viewer's bound of " +
+                                     std::to_string(options_.render_timeout_s) +
+                                     " s per render (--render-timeout) and was stopped: ask for fewer samples "
+                                     "or a smaller image"};
+      return bool(stopped);
+    };
+    const auto images = session_.render_view(*prepared, camera, w, hh, control);
+    if (!images) {
+      if (client_gone()) spdlog::info("viewer: a render was cancelled, its client went away");
+      throw *stopped;
+    }
     if (mode == "rgb") return png(images->rgb);
     if (mode == "acc") return png(images->acc);
     const auto valid = images->acc > 1e-3;
@@ -250,6 +286,9 @@ class Viewer {
   }
 
  private:
+  static constexpr int kMaxSamples = 4096;
+  static constexpr int64_t kBandSamples = int64_t{1} << 18;
+
   std::pair<int, int> person_frame(const httplib::Request& req) const {
     const int count = int(session_.dataset().humans().size());
     const int h = int_param(req, "human", 0, count - 1);
@@ -257,21 +296,63 @@ class Viewer {
     return {h, f};
   }
 
-  // The frame cache: preparing a frame (encoder, tokens) is paid once per frame shown.
-  const PreparedFrame& prepared_frame(int h, int f) {
+  std::optional<HttpError> stopped_or_gone(const std::function<bool()>& client_gone) const {
+    if (stopping_.load()) return HttpError{503, "the viewer is stopping"};
+    if (client_gone()) return HttpError{499, "the client went away"};
+    return std::nullopt;
+  }
+
+  // The renderer, one request at a time (the network runs for one request at a time). Waits
+  // while `interrupted` says nothing, at most as long as a render may run; then 503.
+  std::unique_lock<std::timed_mutex> render_lock(const Interruption& interrupted) {
+    std::unique_lock<std::timed_mutex> lock(render_mutex_, std::defer_lock);
+    const auto until = Clock::now() + std::chrono::seconds(options_.render_timeout_s + 5);
+    while (!lock.try_lock_for(std::chrono::milliseconds(50))) {
+      if (auto e = interrupted()) throw *e;
+      if (Clock::now() > until)
+        throw HttpError{503, "busy: another request has had the renderer for " +
+                                 std::to_string(options_.render_timeout_s + 5) + " s",
+                        2};
+    }
+    if (auto e = interrupted()) throw *e;
+    return lock;
+  }
+
+  // A frame's data (reference views, target image size), without the network; kept for the
+  // last few frames asked for.
+  std::shared_ptr<const PreparedFrame> frame_data(int h, int f) {
+    const auto key = std::make_pair(h, f);
+    {
+      std::lock_guard<std::mutex> lock(frames_mutex_);
+      if (const auto it = data_.find(key); it != data_.end()) return it->second;
+    }
+    auto frame = std::make_shared<PreparedFrame>();
+    frame->human = h;
+    frame->frame = f;
+    frame->sample = session_.dataset().load_item({h, f, options_.view}, 0);
+    std::lock_guard<std::mutex> lock(frames_mutex_);
+    if (data_.size() >= 8) data_.erase(data_.begin());
+    return data_.emplace(key, std::move(frame)).first->second;
+  }
+
+  // The frame cache: preparing a frame (encoder, tokens) is paid once per frame shown. Called
+  // with the renderer held.
+  std::shared_ptr<const PreparedFrame> prepared_frame(int h, int f) {
     const auto key = std::make_pair(h, f);
     auto it = prepared_.find(key);
     if (it == prepared_.end()) {
       if (prepared_.size() >= 4) prepared_.erase(prepared_.begin());
-      it = prepared_.emplace(key, session_.prepare(h, f, view_)).first;
+      it = prepared_.emplace(key, std::make_shared<const PreparedFrame>(session_.prepare(h, f, options_.view))).first;
     }
     return it->second;
   }
 
   const Session& session_;
-  int view_, max_size_, start_human_, start_frame_;
-  std::map<std::pair<int, int>, PreparedFrame> prepared_;
-  std::mutex prepare_mutex_;
+  const Options options_;
+  const std::atomic<bool>& stopping_;
+  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> prepared_;  // with render_mutex_
+  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> data_;      // with frames_mutex_
+  std::mutex frames_mutex_;
   std::timed_mutex render_mutex_;
   std::map<std::string, uint64_t> latest_;  // per client: the newest request seen
   std::mutex latest_mutex_;
@@ -288,92 +369,152 @@ std::string read_file(const fs::path& path) {
 
 
 struct Server::Impl {
-  Impl(const Session& session, const Options& o)
-      : options(o), viewer(session, o.view, o.max_size, o.start_human, o.start_frame) {}
+  Impl(const Session& session, const Options& o) : options(o), viewer(session, o, stopping) {}
   Options options;
+  std::atomic<bool> stopping{false};
   Viewer viewer;
-  httplib::Server server;
+  Listener server;
+  std::unique_ptr<Access> access;  // once bound
 };
 
 Server::Server(const Session& session, const Options& options) : impl_(std::make_unique<Impl>(session, options)) {
-  httplib::Server& server = impl_->server;
+  Listener& server = impl_->server;
   Viewer& viewer = impl_->viewer;
   const fs::path three = th::report::find_three_js();
-    const auto guarded = [](const std::function<void(const httplib::Request&, httplib::Response&)>& fn) {
-      return [fn](const httplib::Request& req, httplib::Response& res) {
-        try {
-          fn(req, res);
-        } catch (const BadRequest& e) {
-          res.status = 400;
-          res.set_content(e.message + "\n", "text/plain");
-        } catch (const th::Error& e) {
-          res.status = 400;
-          res.set_content(std::string(e.what()) + "\n", "text/plain");
-        } catch (const std::exception& e) {
-          spdlog::error("viewer: {}", e.what());
-          res.status = 500;
-          res.set_content(std::string("internal error: ") + e.what() + "\n", "text/plain");
-        }
-      };
+  const auto answer = [](httplib::Response& res, int status, const std::string& message) {
+    res.status = status;
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(message.empty() || message.back() != '\n' ? message + "\n" : message, "text/plain; charset=utf-8");
+  };
+  const auto guarded = [answer](const std::function<void(const httplib::Request&, httplib::Response&)>& fn) {
+    return [fn, answer](const httplib::Request& req, httplib::Response& res) {
+      try {
+        fn(req, res);
+      } catch (const HttpError& e) {
+        answer(res, e.status, e.message);
+        if (e.retry_after_s > 0) res.set_header("Retry-After", std::to_string(e.retry_after_s));
+      } catch (const th::Error& e) {
+        answer(res, 400, e.what());
+      } catch (const std::exception& e) {
+        spdlog::error("viewer: {}", e.what());
+        answer(res, 500, std::string("internal error: ") + e.what());
+      }
     };
-    server.Get("/", guarded([](const httplib::Request&, httplib::Response& res) {
-      res.set_content(kPage, "text/html; charset=utf-8");
-    }));
-    for (const char* name : {"three.min.js", "OrbitControls.js"}) {
-      const std::string file = name;
-      server.Get("/three/" + file, guarded([three, file](const httplib::Request&, httplib::Response& res) {
-        const fs::path path = file == "three.min.js" ? three / "build" / file
-                                                     : three / "examples" / "js" / "controls" / file;
-        if (three.empty() || !fs::is_regular_file(path)) {
-          res.status = 404;
-          res.set_content("three.js not found (Debian: apt-get install libjs-three)\n", "text/plain");
-          return;
-        }
-        res.set_content(read_file(path), "application/javascript");
-      }));
-    }
-    server.Get("/api/info", guarded([&viewer](const httplib::Request&, httplib::Response& res) {
-      res.set_content(viewer.info(), "application/json");
-    }));
-    server.Get("/api/frame", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-      res.set_content(viewer.frame_json(req), "application/json");
-    }));
-    server.Get("/api/reference", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-      res.set_content(viewer.reference(req), "image/png");
-    }));
-    server.Get("/api/evaluate", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-      res.set_content(viewer.evaluate(req), "application/json");
-    }));
-    server.Get("/api/ground_truth", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-      res.set_content(viewer.ground_truth(req), "image/png");
-    }));
-    server.Get("/api/render", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-      const auto image = viewer.render(req);
-      if (!image) {
-        res.status = 409;
-        res.set_content("cancelled by a newer request\n", "text/plain");
+  };
+  // Who is answered at all (viewer/access.hpp), before any route and before a body is read.
+  server.set_pre_routing_handler([this, answer](const httplib::Request& req, httplib::Response& res) {
+    const auto refusal = impl_->access->check(req);
+    if (!refusal) return httplib::Server::HandlerResponse::Unhandled;
+    Listener::close_after_response();
+    answer(res, refusal->status, refusal->message);
+    if (refusal->status == 405) res.set_header("Allow", "GET, HEAD");
+    return httplib::Server::HandlerResponse::Handled;
+  });
+  // "Expect: 100-continue" is answered before routing: refused uploads are refused there too.
+  server.set_expect_100_continue_handler([this, answer](const httplib::Request& req, httplib::Response& res) {
+    const auto refusal = impl_->access->check(req);
+    if (!refusal) return 100;
+    Listener::close_after_response();
+    answer(res, refusal->status, refusal->message);
+    return refusal->status;
+  });
+  server.Get("/", guarded([](const httplib::Request&, httplib::Response& res) {
+    res.set_header("X-Frame-Options", "DENY");
+    res.set_header("Content-Security-Policy", "frame-ancestors 'none'");
+    res.set_content(kPage, "text/html; charset=utf-8");
+  }));
+  for (const char* name : {"three.min.js", "OrbitControls.js"}) {
+    const std::string file = name;
+    server.Get("/three/" + file, guarded([three, file](const httplib::Request&, httplib::Response& res) {
+      const fs::path path = file == "three.min.js" ? three / "build" / file
+                                                   : three / "examples" / "js" / "controls" / file;
+      if (three.empty() || !fs::is_regular_file(path)) {
+        res.status = 404;
+        res.set_content("three.js not found (Debian: apt-get install libjs-three)\n", "text/plain");
         return;
       }
-      res.set_header("Cache-Control", "no-store");
-      res.set_content(*image, "image/png");
+      res.set_content(read_file(path), "application/javascript");
     }));
+  }
+  server.Get("/api/info", guarded([&viewer](const httplib::Request&, httplib::Response& res) {
+    res.set_content(viewer.info(), "application/json");
+  }));
+  server.Get("/api/frame", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+    res.set_content(viewer.frame_json(req), "application/json");
+  }));
+  server.Get("/api/reference", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+    res.set_content(viewer.reference(req), "image/png");
+  }));
+  server.Get("/api/evaluate", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+    res.set_content(viewer.evaluate(req, Listener::client_gone), "application/json");
+  }));
+  server.Get("/api/ground_truth", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+    res.set_content(viewer.ground_truth(req), "image/png");
+  }));
+  server.Get("/api/render", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+    const auto image = viewer.render(req, Listener::client_gone);
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(image, "image/png");
+  }));
 
-  if (!server.bind_to_port(options.host.c_str(), options.port))
-    fail("cannot listen on ", options.host, ":", options.port, " (in use? try another --port)");
-  if (options.host != "127.0.0.1" && options.host != "localhost" && options.host != "::1")
-    spdlog::warn("LISTENING ON {}:{}: anyone who can reach this address can use the viewer", options.host,
-                 options.port);
+  // An empty --host means every interface, as it does for most servers (getaddrinfo would
+  // take it for loopback).
+  server.bind(options.host.empty() ? "0.0.0.0" : options.host, options.port);
+  impl_->access = std::make_unique<Access>(options.host, server.bound_address(), options.port, options.allow_hosts);
+  if (interfaces().find("only") == std::string::npos)
+    spdlog::warn("LISTENING ON {}: anyone who can reach it can use the viewer", interfaces());
 }
 
 Server::~Server() = default;
 
-std::string Server::url() const {
-  const auto& o = impl_->options;
-  return "http://" + (o.host == "0.0.0.0" ? std::string("127.0.0.1") : o.host) + ":" + std::to_string(o.port) + "/";
+namespace {
+
+bool is_loopback(const sockaddr_storage& a) {
+  if (a.ss_family == AF_INET) return (ntohl(reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr) >> 24) == 127;
+  return a.ss_family == AF_INET6 && IN6_IS_ADDR_LOOPBACK(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
 }
 
-void Server::run() { impl_->server.listen_after_bind(); }
+bool is_any(const sockaddr_storage& a) {
+  if (a.ss_family == AF_INET) return reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr == htonl(INADDR_ANY);
+  return a.ss_family == AF_INET6 && IN6_IS_ADDR_UNSPECIFIED(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
+}
 
-void Server::stop() { impl_->server.stop(); }
+}  // namespace
+
+std::string Server::url() const {
+  const auto bound = impl_->server.bound_address();
+  const std::string& host = impl_->options.host;
+  in6_addr scratch{};
+  const bool literal = host.empty() || ::inet_pton(AF_INET, host.c_str(), &scratch) == 1 ||
+                       ::inet_pton(AF_INET6, host.c_str(), &scratch) == 1;
+  std::string name;
+  if (is_any(bound)) name = impl_->server.ipv6_only() ? "[::1]" : "127.0.0.1";
+  else if (literal) name = url_host(numeric_address(bound));
+  else name = host;
+  return "http://" + name + ":" + std::to_string(impl_->options.port) + "/";
+}
+
+std::string Server::interfaces() const {
+  const auto bound = impl_->server.bound_address();
+  const std::string address = url_host(numeric_address(bound));
+  if (is_any(bound)) {
+    const char* families = bound.ss_family == AF_INET ? ", IPv4)"
+                           : impl_->server.ipv6_only() ? ", IPv6)"
+                                                       : ", IPv4 and IPv6)";
+    return "every interface of this machine (" + address + families;
+  }
+  return address + (is_loopback(bound) ? " only (this machine)" : " (reachable from the network)");
+}
+
+std::string Server::host_names() const { return impl_->access->names(); }
+
+void Server::run() {
+  if (!impl_->stopping) impl_->server.listen_after_bind();
+}
+
+void Server::stop() {
+  impl_->stopping = true;
+  impl_->server.shut_down();
+}
 
 }  // namespace th::viewer

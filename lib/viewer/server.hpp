@@ -16,35 +16,58 @@
 // One render runs at a time; a request with a higher seq from the same page (client=ID) cancels
 // that page's request in flight (409 for the cancelled one), so a dragged camera never waits
 // behind stale frames. Prepared frames are kept, so only a frame's first view pays for them.
+// A render is bounded: image side (max_size), samples (4096) and time (render_timeout_s, then
+// 503 naming the bound); it is cancelled between bands of rows when its client goes away or the
+// server stops. A request waiting for the renderer gets 503 with Retry-After when it has waited
+// longer than a render may take. /api/info, /api/frame, /api/reference and /api/ground_truth read
+// data only and answer while a render runs.
+// As a server (viewer/access.hpp, viewer/listener.hpp): the Host header must name this server
+// (421 otherwise), the API answers its own page only (403 for cross-origin requests), request
+// bodies are refused unread (413), the port is exclusive, and slow or idle connections hold a
+// thread for a few seconds at most.
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "inference/session.hpp"
 
 namespace th::viewer {
 
 struct Options {
-  std::string host = "127.0.0.1";  // another address is announced with a warning
+  std::string host = "127.0.0.1";  // another address is announced with a warning; "" or "::": all
   int port = 7007;
+  std::vector<std::string> allow_hosts;  // Host names answered beside loopback and the bound address
+  int render_timeout_s = 60;             // longest one render may run
   int view = 3;          // the dataset camera the first view starts from
   int max_size = 512;    // largest image side a request may ask for
   int start_human = 0;   // shown first
   int start_frame = -1;  // -1: the person's first test frame
 };
 
+// `name` as the Host header carries it (lower case, IPv6 in brackets); throws th::Error unless
+// it is a host name or address without a port (--allow-host).
+std::string allowed_host(const std::string& name);
+
 class Server {
  public:
-  // Binds host:port (th::Error when it cannot) and registers the routes; serves nothing yet.
+  // Binds host:port exclusively (th::Error naming the address and why when it cannot, e.g. a
+  // port in use) and registers the routes; serves nothing yet.
   Server(const inference::Session& session, const Options& options);
   ~Server();
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
+  // A URL a browser on this machine opens: loopback for an any-address bind, IPv6 in brackets.
   std::string url() const;
+  // Where it listens, in words ("127.0.0.1 only", "every interface (IPv4 and IPv6)").
+  std::string interfaces() const;
+  // The Host names it answers to, with the port.
+  std::string host_names() const;
   // Serves until stop().
   void run();
-  // Ends run(); callable from any thread.
+  // Ends run() within a fraction of a second: cancels the render in flight and closes every
+  // connection. Callable from any thread, also before run().
   void stop();
 
  private:
