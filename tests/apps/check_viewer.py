@@ -10,11 +10,25 @@ Starts the viewer on a free port of 127.0.0.1 and checks:
   - bad requests get 400 and a message naming the parameter; paths outside the API get 404;
   - in headless Chromium, a drag of the camera brings fast views, then a refined one, and the
     image changes (the page's ?selftest=drag dispatches the mouse events);
-  - SIGINT stops the server with exit 0.
+and, as a server:
+  - a Host that does not name the viewer is refused (421; also a DNS-rebinding name in Chromium),
+    a cross-origin API request is refused (403: Origin, Sec-Fetch-Site; a cross-site <img> in
+    Chromium), the viewer's own names and origin are answered;
+  - request bodies are refused before they are read (413, the process does not grow), other
+    methods get 405;
+  - slow connections do not make it unreachable, and one that dribbles is closed;
+  - /api/frame answers while a 512x512, 4096-sample render runs; a render whose client went away
+    is cancelled; a render past --render-timeout is stopped with a 503 naming the bound;
+  - a second viewer on the same port exits 2 naming the port;
+  - --host :: prints a URL that works and says where it listens; an unwritable k-means cache
+    folder does not stop it;
+  - SIGINT while a render runs stops it with exit 0 within seconds (the time is printed), as does
+    SIGTERM.
 Standard library only.
 """
 import argparse
 import csv
+import http.client
 import json
 import os
 import re
@@ -24,6 +38,7 @@ import socket
 import struct
 import subprocess
 import sys
+import threading
 import time
 import urllib.error
 import urllib.parse
@@ -47,6 +62,216 @@ def get(base, path, params=None):
         return e.code, e.read()
 
 
+def request(port, path, headers=None, method='GET', host='127.0.0.1', timeout=60):
+    """(status, body text, elapsed seconds) of one request with these headers (Host as given)."""
+    t0 = time.monotonic()
+    conn = http.client.HTTPConnection(host, port, timeout=timeout)
+    try:
+        conn.request(method, path, headers=headers or {})
+        r = conn.getresponse()
+        return r.status, r.read().decode(errors='replace'), time.monotonic() - t0
+    finally:
+        conn.close()
+
+
+def rss_kib(pid):
+    with open(f'/proc/{pid}/status') as f:
+        return next(int(line.split()[1]) for line in f if line.startswith('VmRSS:'))
+
+
+def answer_length(data):
+    """The length of the HTTP answer that `data` begins with (headers and Content-Length bytes;
+    without Content-Length, the answer ends when the connection closes)."""
+    head, _, _ = data.partition(b'\r\n\r\n')
+    m = re.search(rb'(?i)content-length: *(\d+)', head)
+    return len(head) + 4 + int(m.group(1)) if m else float('inf')
+
+
+def read_answer(sock):
+    """One whole HTTP answer from `sock` (or what came before it closed), as text."""
+    data = b''
+    while b'\r\n\r\n' not in data or len(data) < answer_length(data):
+        chunk = sock.recv(65536)
+        if not chunk:
+            break
+        data += chunk
+    return data.decode(errors='replace')
+
+
+class Background:
+    """A request in a thread: .result is (status, text) or ('error', reason) once it ends."""
+
+    def __init__(self, port, path):
+        self.result = None
+        self.sock = None
+
+        def run():
+            try:
+                self.sock = socket.create_connection(('127.0.0.1', port), timeout=120)
+                self.sock.sendall(f'GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n\r\n'.encode())
+                answer = read_answer(self.sock)
+                head = answer.split('\r\n', 1)[0].split()
+                self.result = (int(head[1]), answer.partition('\r\n\r\n')[2]) if head else \
+                    ('error', 'connection closed without an answer')
+            except OSError as e:
+                self.result = ('error', str(e))
+
+        self.thread = threading.Thread(target=run, daemon=True)
+        self.thread.start()
+
+    def abandon(self):
+        self.sock.shutdown(socket.SHUT_RDWR)  # the FIN leaves now, though a thread waits in recv
+        self.sock.close()
+
+    def wait(self, timeout):
+        self.thread.join(timeout)
+        return self.result
+
+
+def heavy_render_path(frame, cam, client='heavy', seq=1):
+    """A 512x512 render at 4096 samples from a dataset camera's pose: many seconds on a CPU."""
+    v = lambda x: ','.join(repr(float(a)) for a in x)
+    return '/api/render?' + urllib.parse.urlencode({
+        'human': 0, 'frame': frame, 'eye': v(cam['eye']), 'forward': v(cam['forward']), 'up': v(cam['up']),
+        'fovy': cam['fovy'], 'width': 512, 'height': 512, 'samples': 4096, 'client': client, 'seq': seq})
+
+
+def start_viewer(binary, args):
+    """The viewer and the lines it printed up to and including its 'listening on' line."""
+    proc = subprocess.Popen([binary, *args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line.rstrip())
+        if 'listening on' in line:
+            break
+    # Drain the rest of its output so that it never blocks on a full pipe.
+    rest = []
+    threading.Thread(target=lambda: rest.extend(l.rstrip() for l in proc.stdout), daemon=True).start()
+    return proc, lines, rest
+
+
+def stop_timed(proc, sig):
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    try:
+        code = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        code = 'hung'
+    return code, time.monotonic() - t0
+
+
+def check_as_server(port, pid, frame, cams, browser, work):
+    """Host and Origin, bodies and methods, slow connections, Chromium's view of both."""
+    own = f'127.0.0.1:{port}'
+    for host in (f'evil.example:{port}', f'127.0.0.1:{port + 1}', 'evil.example', f'localhost.evil.example:{port}'):
+        status, text, _ = request(port, '/api/info', {'Host': host})
+        check(status == 421 and f"Host '{host}'" in text and '--allow-host' in text,
+              f'Host {host}: 421 naming it ({status}: {text.strip()[:120]!r})')
+    status, text, _ = request(port, '/', {'Host': f'evil.example:{port}'})
+    check(status == 421, f'the page for Host evil.example: 421 ({status})')
+    for host in (own, f'localhost:{port}', f'LOCALHOST:{port}', f'[::1]:{port}'):
+        status, _, _ = request(port, '/api/info', {'Host': host})
+        check(status == 200, f'Host {host}: answered ({status})')
+    for origin in ('http://evil.example', f'http://evil.example:{port}', 'null', f'http://127.0.0.1:{port + 1}'):
+        status, text, _ = request(port, '/api/info', {'Origin': origin})
+        check(status == 403 and f"origin '{origin}'" in text, f'Origin {origin}: 403 naming it ({status}: {text.strip()!r})')
+    status, _, _ = request(port, '/api/info', {'Origin': f'http://{own}'})
+    check(status == 200, f'its own Origin: answered ({status})')
+    for site, want in (('cross-site', 403), ('same-site', 403), ('same-origin', 200), ('none', 200)):
+        status, text, _ = request(port, '/api/info', {'Sec-Fetch-Site': site})
+        check(status == want, f'Sec-Fetch-Site: {site} on the API: {want} ({status}: {text.strip()[:100]!r})')
+    status, _, _ = request(port, '/', {'Sec-Fetch-Site': 'cross-site'})
+    check(status == 200, f'the page itself may be linked from another site ({status})')
+    with socket.create_connection(('127.0.0.1', port), timeout=10) as s:
+        s.sendall(b'GET /api/info HTTP/1.0\r\n\r\n')
+        answer = read_answer(s)
+    check(answer.startswith('HTTP/1.1 400') and 'no Host header' in answer, f'no Host header: 400 ({answer[:40]!r})')
+
+    # A 1000 MiB body is refused from its headers, before it is read: the answer comes while the
+    # client has sent nothing of it, and what the client then sends is not kept.
+    before = rss_kib(pid)
+    for method, extra in (('POST', ''), ('GET', ''), ('POST', 'Expect: 100-continue\r\n')):
+        with socket.create_connection(('127.0.0.1', port), timeout=10) as s:
+            t0 = time.monotonic()
+            s.sendall(f'{method} /api/info HTTP/1.1\r\nHost: {own}\r\nContent-Length: 1048576000\r\n{extra}\r\n'.encode())
+            answer = read_answer(s)
+            sent = 0
+            try:
+                for _ in range(256):  # up to 64 MiB of the body
+                    s.sendall(b'\0' * (1 << 18))
+                    sent += 1 << 18
+            except OSError:
+                pass
+        status = answer.split(' ', 2)[1] if answer.startswith('HTTP/') else answer[:40]
+        check(status == '413' and 'nothing was read' in answer and time.monotonic() - t0 < 10,
+              f'{method} with a 1000 MiB body{" (Expect: 100-continue)" if extra else ""}: 413 before the body '
+              f'({status}; the connection took {sent >> 20} MiB before it closed)')
+    with socket.create_connection(('127.0.0.1', port), timeout=10) as s:
+        s.sendall(f'POST /api/info HTTP/1.1\r\nHost: {own}\r\nTransfer-Encoding: chunked\r\n\r\n'.encode())
+        answer = read_answer(s)
+    check(answer.startswith('HTTP/1.1 413'), f'a chunked body: 413 ({answer[:40]!r})')
+    grown = rss_kib(pid) - before
+    check(grown < 32 * 1024, f'refused bodies are not kept (the process grew {grown >> 10} MiB)')
+    status, text, _ = request(port, '/api/info', method='PUT')
+    check(status == 405 and 'GET' in text, f'PUT: 405 ({status}: {text.strip()!r})')
+
+    # Twenty connections that send half a request and wait, and twenty that send nothing: the
+    # viewer still answers at once; a request dribbled a byte a second is cut off.
+    slow = []
+    for i in range(40):
+        s = socket.create_connection(('127.0.0.1', port), timeout=30)
+        if i < 20:
+            s.sendall(f'GET /api/info HTTP/1.1\r\nHost: {own}\r\nX-Slow: '.encode())
+        slow.append(s)
+    status, _, elapsed = request(port, '/api/info', timeout=30)
+    check(status == 200 and elapsed < 3, f'with 40 slow connections open, /api/info answers ({status}, {elapsed:.2f} s)')
+    for s in slow:
+        s.close()
+    with socket.create_connection(('127.0.0.1', port), timeout=30) as s:
+        t0 = time.monotonic()
+        s.sendall(f'GET /api/info HTTP/1.1\r\nHost: {own}\r\n'.encode())
+        closed = None
+        while time.monotonic() - t0 < 25:
+            try:
+                s.sendall(b'X')
+                time.sleep(1)
+            except OSError:
+                closed = time.monotonic() - t0
+                break
+            s.setblocking(False)
+            try:
+                if s.recv(4096) == b'':
+                    closed = time.monotonic() - t0
+                    break
+            except BlockingIOError:
+                pass
+            finally:
+                s.setblocking(True)
+    check(closed is not None and closed < 15, f'a request dribbled byte by byte is cut off ({closed and round(closed, 1)} s)')
+
+    if not browser:
+        print('skip: Chromium is not installed, DNS rebinding and a cross-site image are not tried')
+        return
+
+    def chromium(url, *flags):
+        return subprocess.run([browser, '--headless', '--no-sandbox', '--disable-gpu', *flags,
+                               '--user-data-dir=' + os.path.join(work, 'chromium-profile'),
+                               '--virtual-time-budget=5000', '--dump-dom', url],
+                              capture_output=True, text=True, timeout=120).stdout
+    # DNS rebinding: a name an attacker resolves to 127.0.0.1.
+    dom = chromium(f'http://evil.example:{port}/', '--host-resolver-rules=MAP evil.example 127.0.0.1')
+    check(f"refused: Host 'evil.example:{port}'" in dom and 'TransHuman viewer' not in dom,
+          'Chromium, evil.example mapped to 127.0.0.1: the page is refused (' + dom.strip()[-160:] + ')')
+    # Another site's page embedding a view: Sec-Fetch-Site cross-site.
+    src = f'http://127.0.0.1:{port}/api/reference?human=0&frame={frame}&index=0'
+    page = ('data:text/html,<body><img src="' + src + '" onload="document.body.dataset.img=\'loaded\'" '
+            'onerror="document.body.dataset.img=\'refused\'"></body>')
+    dom = chromium(page)
+    check('data-img="refused"' in dom, 'Chromium, another site\'s <img> of a reference view: refused (' +
+          (re.search(r'data-img="\w+"', dom) or [dom.strip()[-120:]])[0] + ')')
+
+
 def png_size(data):
     if data[:8] != b'\x89PNG\r\n\x1a\n':
         return None
@@ -68,15 +293,15 @@ def main():
     with socket.socket() as s:
         s.bind(('127.0.0.1', 0))
         port = s.getsockname()[1]
-    server = subprocess.Popen([os.path.join(args.bin, 'transhuman-view'), *common, '--checkpoint', args.checkpoint,
-                               '--port', str(port)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    server, lines, log = start_viewer(os.path.join(args.bin, 'transhuman-view'),
+                                      [*common, '--checkpoint', args.checkpoint, '--port', str(port)])
     base = f'http://127.0.0.1:{port}'
+    browser = next((shutil.which(n) for n in (os.environ.get('TH_CHROMIUM', ''), 'chromium', 'chromium-browser')
+                    if n and shutil.which(n)), None)
     try:
-        line = ''
-        for line in server.stdout:
-            if 'open http://' in line:
-                break
+        line = next((l for l in lines if 'open http://' in l), '')
         check(f'open {base}/' in line, f'the viewer prints its URL ({line.strip()!r})')
+        check(any(f'listening on 127.0.0.1 only' in l for l in lines), f'and where it listens ({lines[-1:]})')
 
         status, body = get(base, '/api/info')
         info = json.loads(body)
@@ -165,8 +390,6 @@ def main():
 
         # The page in headless Chromium: a drag (dispatched mouse events, ?selftest=drag) brings
         # fast views while the camera moves, then a refined one, and the image changes.
-        browser = next((shutil.which(n) for n in (os.environ.get('TH_CHROMIUM', ''), 'chromium', 'chromium-browser')
-                        if n and shutil.which(n)), None)
         if browser:
             dom = subprocess.run([browser, '--headless', '--no-sandbox', '--disable-gpu',
                                   '--user-data-dir=' + os.path.join(args.work, 'chromium-profile'),
@@ -177,16 +400,106 @@ def main():
                   'a drag in Chromium re-renders: ' + (m.group(0) if m else 'no result: ' + dom[-300:]))
         else:
             print('skip: Chromium is not installed, the drag is not checked')
+
+        check_as_server(port, server.pid, frame, cams, browser, args.work)
+
+        # /api/frame reads data only: it answers while a long render runs (another frame, not
+        # yet seen). The render's client then goes away: the render is cancelled, and another
+        # page's render gets the renderer at once.
+        heavy = Background(port, heavy_render_path(frame, c, client='heavy', seq=1))
+        time.sleep(1.5)
+        other = info['humans'][0]['frames'][-1]
+        status, _, elapsed = request(port, f'/api/frame?human=0&frame={other}', timeout=30)
+        check(status == 200 and elapsed < 5 and heavy.result is None,
+              f'/api/frame answers while a 512x512, 4096-sample render runs ({status}, {elapsed:.2f} s)')
+        heavy.abandon()
+        status, _, elapsed = request(port, '/api/render?' + urllib.parse.urlencode({**look, 'client': 'next', 'seq': 1}),
+                                     timeout=60)
+        check(status == 200 and elapsed < 5,
+              f'a render whose client went away is cancelled: the next render is served in {elapsed:.2f} s ({status})')
+        check(any('its client went away' in l for l in log), 'the viewer says so')
+
+        # A second viewer on the same port is refused, naming it.
+        p = subprocess.run([os.path.join(args.bin, 'transhuman-view'), *common, '--checkpoint', args.checkpoint,
+                            '--port', str(port)], capture_output=True, text=True, timeout=120)
+        last = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ''
+        check(p.returncode == 2 and f'port {port} is in use' in last,
+              f'a second viewer on port {port}: exit 2 ({p.returncode}, {last!r})')
     finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            code = server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            server.kill()
-            code = 'hung'
-        check(code == 0, f'SIGINT stops the viewer with exit 0 ({code})')
+        # SIGINT while a 512x512, 4096-sample render runs: the render is cancelled (its client is
+        # told the viewer stops) and the viewer exits 0 within seconds.
+        heavy = Background(port, heavy_render_path(frame, c, client='last', seq=1)) if 'c' in locals() else None
+        time.sleep(1.5)
+        code, seconds = stop_timed(server, signal.SIGINT)
+        print(f'time: SIGINT to exit during a render: {seconds:.2f} s', flush=True)
+        check(code == 0 and seconds < 10, f'SIGINT during a render stops the viewer with exit 0 ({code}, {seconds:.2f} s)')
+        if heavy:
+            result = heavy.wait(10)
+            check(result is not None and result[0] in (503, 'error'),
+                  f'the render in flight was stopped ({result and (result[0], result[1].strip()[:60])})')
+
+    # --host :: (every interface): the printed URL works; an unwritable k-means cache folder (a
+    # path below a file) does not stop it; a render past --render-timeout is stopped with a 503
+    # naming the bound; SIGTERM during a render ends it within seconds.
+    with socket.socket(socket.AF_INET6) as s6:
+        s6.bind(('::', 0))
+        port6 = s6.getsockname()[1]
+    blocker = os.path.join(args.work, 'a_file')
+    open(blocker, 'w').close()
+    unwritable = [f'model.grouping.cache_dir={blocker}/kmeans_cache']
+    server, lines, rest = start_viewer(os.path.join(args.bin, 'transhuman-view'),
+                                       [*common, *unwritable, '--checkpoint', args.checkpoint, '--port', str(port6),
+                                        '--host', '::', '--render-timeout', '2'])
+    try:
+        printed = '\n'.join(lines)
+        m = re.search(r'open (http://\S+) in a browser', printed)
+        check(m is not None and m.group(1) == f'http://127.0.0.1:{port6}/', f'--host :: prints a usable URL ({m and m.group(1)})')
+        check(f'listening on every interface of this machine ([::], IPv4 and IPv6)' in printed,
+              'it says where it listens: ' + (lines[-1] if lines else ''))
+        if m:
+            status, body = get(m.group(1).rstrip('/'), '/api/info')
+            check(status == 200, f'the printed URL answers ({status})')
+        status, text, _ = request(port6, '/api/info', host='::1')
+        check(status == 200, f'so does [::1]:{port6} ({status})')
+        status, img, _ = request(port6, '/api/render?' + urllib.parse.urlencode({**look, 'seq': 1}))
+        check(status == 200, f'with an unwritable k-means cache folder, a view renders ({status}: {img[:80]!r})')
+        status, text, elapsed = request(port6, heavy_render_path(frame, c), timeout=60)
+        check(status == 503 and '--render-timeout' in text and elapsed < 10,
+              f'a render past --render-timeout 2: 503 naming the bound in {elapsed:.1f} s ({status}: {text.strip()!r})')
+    finally:
+        heavy = Background(port6, heavy_render_path(frame, c, client='term', seq=1))
+        time.sleep(0.5)
+        code, seconds = stop_timed(server, signal.SIGTERM)
+        print(f'time: SIGTERM to exit during a render: {seconds:.2f} s', flush=True)
+        check(code == 0 and seconds < 10, f'SIGTERM during a render stops the viewer with exit 0 ({code}, {seconds:.2f} s)')
+        time.sleep(0.2)
+        check(not any('Traceback' in l or 'internal error' in l for l in rest), 'it printed no internal error')
+    # --host '' (every IPv4 interface) prints a loopback URL; --allow-host adds a name.
+    with socket.socket() as s4:
+        s4.bind(('127.0.0.1', 0))
+        port4 = s4.getsockname()[1]
+    server, lines, rest = start_viewer(os.path.join(args.bin, 'transhuman-view'),
+                                       [*common, '--checkpoint', args.checkpoint, '--port', str(port4), '--host', '',
+                                        '--allow-host', 'Viewer.Example', '--allow-host', '[FD00::7]'])
+    try:
+        printed = '\n'.join(lines)
+        check(f'open http://127.0.0.1:{port4}/ in a browser' in printed and
+              'listening on every interface of this machine (0.0.0.0, IPv4)' in printed,
+              "--host '' prints a usable URL and where it listens: " + ' | '.join(lines[-2:]))
+        for host in (f'viewer.example:{port4}', f'[fd00::7]:{port4}'):
+            status, _, _ = request(port4, '/api/info', {'Host': host})
+            check(status == 200, f'--allow-host: Host {host} answered ({status})')
+        status, _, _ = request(port4, '/api/info', {'Host': f'other.example:{port4}'})
+        check(status == 421, f'another name still refused ({status})')
+    finally:
+        code, seconds = stop_timed(server, signal.SIGINT)
+        check(code == 0, f'SIGINT when idle: exit 0 in {seconds:.2f} s ({code})')
+
     for flags, message in ((['--human', 'nobody'], "no person 'nobody' in setting"),
-                           (['--frame', '100000'], '--frame 100000: ')):
+                           (['--frame', '100000'], '--frame 100000: '),
+                           (['--allow-host', 'evil.example:80'], "--allow-host 'evil.example:80': give the name "
+                                                                 'without a port'),
+                           (['--allow-host', 'a b'], "--allow-host 'a b' is not a host name or address")):
         p = subprocess.run([os.path.join(args.bin, 'transhuman-view'), *common, '--checkpoint', args.checkpoint,
                             '--dry-run', *flags], capture_output=True, text=True)
         last = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else ''
