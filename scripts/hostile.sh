@@ -619,6 +619,72 @@ check "compare-traces.py <a config, not a trace>" 2 "compare-traces: error: '$wo
 check_out "compare-traces.py <a trace> <itself>" "the same operators" \
   "$py" scripts/compare-traces.py "$work/trace.json" "$work/trace.json"
 
+# ---- links, parents and dry runs: what --force and the writers may touch ----------------------------
+# unchanged NAME FILE SUM: FILE still holds what md5 SUM says.
+unchanged() {
+  if [[ -f $2 && $(sum_of "$2") == "$3" ]]; then rows+=("| $1 | - | - | - | unchanged | ok |")
+  else rows+=("| $1 | - | - | - | ${2//$work/…} changed or gone | FAIL |"); failures=$((failures + 1)); fi
+}
+# The config's parent inside --out: every config file read is an input.
+mkdir -p "$work/parented/cfg"
+cp tests/configs/tiny_train.yaml "$work/parented/cfg/base.yaml"
+sed -i "s|parent: ../../configs/default.yaml|parent: $repo/configs/default.yaml|" "$work/parented/cfg/base.yaml"
+printf 'parent: parented/cfg/base.yaml\n' >"$work/child.yaml"
+echo keep >"$work/parented/results.md"
+check "--force with the config's parent inside --out" 2 \
+  "--force would delete the config's parent (child.yaml) '$work/parented/cfg/base.yaml'" \
+  "$apps/transhuman-train" --config "$work/child.yaml" $(on "$data") model.grouping.cache_dir="$work/kmeans" \
+  --out "$work/parented" --force --max-steps 0
+kept "  ... the parent config and the folder" "$work/parented/cfg/base.yaml" "$work/parented/results.md"
+# Inputs reached through a link inside --out: compared as given, not only resolved.
+mkdir -p "$work/linked"
+ln -s "$data" "$work/linked/data"
+check "--force with data.root reached through a link inside --out" 2 \
+  "--force would delete the data root (data.root) '$work/linked/data'" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$work/linked/data") --out "$work/linked" --force --max-steps 0
+kept "  ... the link" "$work/linked/data"
+ln -s "$ckpt" "$work/linked/ckpt.pt"
+check "--force with --checkpoint reached through a link inside --out" 2 \
+  "--force would delete the checkpoint (--checkpoint) '$work/linked/ckpt.pt'" \
+  "$apps/transhuman-eval" "${tiny[@]}" $(on "$data") --checkpoint "$work/linked/ckpt.pt" --out "$work/linked" --force
+# A dry run writes nothing, --force or not.
+mkdir -p "$work/dry" && echo keep >"$work/dry/results.md"
+for app in train eval; do
+  check_out "$app --dry-run --force --out <a folder>" "dry run: --out '$work/dry' is not touched" \
+    "$apps/transhuman-$app" "${tiny[@]}" $(on "$data") --dry-run --force --out "$work/dry"
+done
+kept "  ... the folder's file" "$work/dry/results.md"
+absent "  ... no lock or config written" "$work/dry/config.yaml"
+absent "  ... no lock file" "$work/dry/.lock"
+check_out "render --dry-run --out <a new folder>" "dry run: --out '$work/dry_render' is not touched" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --dry-run --out "$work/dry_render"
+absent "  ... the folder not made" "$work/dry_render"
+# The run lock is created without following links; a link in its place is refused.
+echo secret >"$work/outside.txt"
+outside=$(sum_of "$work/outside.txt")
+mkdir -p "$work/symlock" "$work/hardlock"
+ln -s "$work/outside.txt" "$work/symlock/.lock"
+check "a .lock that is a symbolic link" 2 "the run folder's lock file '$work/symlock/.lock' is a symbolic link" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/symlock" --max-steps 0
+ln "$work/outside.txt" "$work/hardlock/.lock"
+check "a .lock that is a hard link" 2 "the run folder's lock file '$work/hardlock/.lock' is a hard link to another file" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/hardlock" --max-steps 0
+unchanged "  ... the linked file" "$work/outside.txt" "$outside"
+# Outputs are never written through a link the command did not make: the video and the files
+# written through a temporary file are renamed over the name, replacing a planted link.
+mkdir -p "$work/orbit_linked"
+ln -s "$work/outside.txt" "$work/orbit_linked/video.mp4"
+ln -s "$work/outside.txt" "$work/orbit_linked/config.yaml"
+check "render --out <a folder of its outputs, video.mp4 and config.yaml links>" 2 \
+  "orbit_linked' holds ' && a symbolic link this command did not make" \
+  "$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/orbit_linked" \
+  --orbit 2 --width 16 --height 16
+mkdir -p "$work/run_linked" && cp -r "$work/run/." "$work/run_linked/" && rm -f "$work/run_linked/.lock"
+ln -sf "$work/outside.txt" "$work/run_linked/metrics.jsonl"
+check "train --resume in a run whose metrics.jsonl is a link" 2 "holds 'metrics.jsonl', a symbolic link" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run_linked" --resume
+unchanged "  ... the file the links pointed at" "$work/outside.txt" "$outside"
+
 table=$(
   echo "| case | expected exit | exit | seconds | last stderr line | |"
   echo "|---|---|---|---|---|---|"

@@ -4,6 +4,7 @@
 
 #include <fcntl.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -97,11 +98,12 @@ bool matches(const std::string& name, const std::string& pattern) {
 void refuse_clearing_inputs(const fs::path& dir, const Inputs& inputs) {
   for (const auto& [what, path] : inputs) {
     std::error_code ec;
-    if (path.empty() || !fs::exists(path, ec)) continue;
-    if (path_within(path, dir))
+    if (path.empty() || !(fs::exists(path, ec) || fs::is_symlink(path, ec))) continue;
+    // As given too: an input reached through a link inside --out would lose the link.
+    if (path_within(path, dir) || path_within_as_given(path, dir))
       fail("--force would delete ", what, " '", path, "', an input of this command, which lies in --out '",
            dir.string(), "': choose another --out (nothing was removed)");
-    if (path_within(dir, path))
+    if (path_within(dir, path) || path_within_as_given(dir, path))
       fail("--force would delete part of ", what, " '", path, "', an input of this command: --out '", dir.string(),
            "' lies inside it (nothing was removed)");
   }
@@ -129,16 +131,23 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
   if (!fs::exists(dir, ec)) return;
   if (!fs::is_directory(dir, ec)) fail("--out '", dir.string(), "' is a file, not a folder");
   // The folder's entries, those another command wrote first.
-  std::vector<std::string> entries, foreign;
+  std::vector<std::string> entries, foreign, links;
   for (const auto& e : fs::directory_iterator(dir)) {
     const auto name = e.path().filename().string();
     if (name == kLockFile) continue;
     bool own = false;
     for (const auto& pattern : own_outputs) own = own || matches(name, pattern);
     (own ? entries : foreign).push_back(name);
+    if (e.is_symlink(ec)) links.push_back(name);
   }
   entries.insert(entries.begin(), foreign.begin(), foreign.end());
   if (entries.empty()) return;
+  // A folder that is continued (--resume, or a folder of this command's own outputs) is written
+  // into as it is: a link there would take the command's writes elsewhere.
+  const bool continued = resume || (!own_outputs.empty() && foreign.empty() && !force);
+  if (continued && !links.empty())
+    fail("--out '", dir.string(), "' holds '", links.front(), "', a symbolic link this command did not make: ",
+         "its outputs are written into the folder itself (remove the link, or --force to replace the contents)");
   if (resume) {
     const fs::path previous = dir / "config.yaml";
     if (!fs::exists(previous)) fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
@@ -195,8 +204,19 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
 
 int lock_run_dir(const fs::path& dir, const std::string& app_name) {
   const fs::path file = dir / kLockFile;
-  const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  // Never through a link: a symbolic link in its place is refused by O_NOFOLLOW, a hard link (a
+  // file of somewhere else) or anything but a regular file by fstat, before a byte is written.
+  const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK, 0644);
+  if (fd < 0 && errno == ELOOP)
+    fail("the run folder's lock file '", file.string(), "' is a symbolic link: remove it (nothing was written)");
   if (fd < 0) fail("cannot open the run folder's lock file '", file.string(), "': ", std::strerror(errno));
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || st.st_nlink != 1) {
+    const bool linked = S_ISREG(st.st_mode) && st.st_nlink > 1;
+    ::close(fd);
+    fail("the run folder's lock file '", file.string(), "' is ",
+         linked ? "a hard link to another file" : "not a regular file", ": remove it (nothing was written)");
+  }
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
     std::string holder;
@@ -257,6 +277,17 @@ void require_weight_files(Config& c, bool training, bool scoring) {
   if (scoring) require("eval.lpips_weights", c.eval.lpips_weights, lpips, "LPIPS is then not reported");
 }
 
+// The start's log lines.
+RunContext finish_start(RunContext& ctx, const CommonOptions& o, const std::string& app_name, bool own_malloc,
+                        int threads) {
+  spdlog::info("{} | config {} | {}", app_name, o.config,
+               ctx.run_dir.empty() ? "no run directory" : "run directory " + ctx.run_dir.string());
+  runtime::log_blas();
+  if (!own_malloc) spdlog::debug("malloc: glibc defaults (TH_MALLOC=system)");
+  spdlog::info("device {} | {} threads", ctx.device.str(), threads);
+  return ctx;
+}
+
 }  // namespace
 
 RunContext start_run(const CommonOptions& o, const std::string& app_name,
@@ -270,7 +301,8 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   if (o.threads >= 0) overrides.push_back("threads=" + std::to_string(o.threads));
 
   RunContext ctx;
-  ctx.resolved = config::load_tree(o.config, overrides);
+  std::vector<fs::path> config_files;  // --config and every parent it names: inputs all
+  ctx.resolved = config::load_tree(o.config, overrides, &config_files);
   ctx.config = config::from_tree<Config>(ctx.resolved);
   ctx.resolved = config::to_tree(ctx.config);  // every field, defaults included
   require_weight_files(ctx.config, o.training, o.scoring);
@@ -282,9 +314,16 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
 
   const std::string out = !o.out.empty() ? o.out : default_out;
   if (!out.empty()) {
-    ctx.run_dir = out;
     auto inputs = config_inputs(ctx.config, o.config);
+    for (size_t i = 1; i < config_files.size(); ++i)
+      inputs.push_back({"the config's parent (" + config_files[i - 1].filename().string() + ")", config_files[i]});
     inputs.insert(inputs.end(), o.inputs.begin(), o.inputs.end());
+    if (o.dry_run) {  // a dry run writes nothing: the folder is checked as the run would check it
+      if (o.guard_out) claim_run_dir(out, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, true);
+      spdlog::info("dry run: --out '{}' is not touched", out);
+      return finish_start(ctx, o, app_name, own_malloc, threads);
+    }
+    ctx.run_dir = out;
     // Checked before anything is written (a refused folder gets no lock file), then again
     // under the lock, which a second writer cannot take, before --force clears the folder.
     auto claim = [&](bool check_only) {
@@ -305,12 +344,7 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
     config::write_yaml(ctx.run_dir / "config.yaml", ctx.resolved);
   }
 
-  spdlog::info("{} | config {} | {}", app_name, o.config,
-               ctx.run_dir.empty() ? "no run directory" : "run directory " + ctx.run_dir.string());
-  runtime::log_blas();
-  if (!own_malloc) spdlog::debug("malloc: glibc defaults (TH_MALLOC=system)");
-  spdlog::info("device {} | {} threads", ctx.device.str(), threads);
-  return ctx;
+  return finish_start(ctx, o, app_name, own_malloc, threads);
 }
 
 int guarded_main(const std::string& app_name, const std::function<int()>& body) {

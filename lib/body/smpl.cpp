@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "geometry/camera.hpp"
 #include "io/npy.hpp"
 #include "io/pickle.hpp"
@@ -209,13 +210,7 @@ void save_smpl_pkl(const fs::path& path, const SmplModel& m) {
   put("bs_type", embedded(Value::str("lrotmin")));
   out += kSetItems;
   out += kStop;
-  const fs::path tmp = path.string() + ".tmp";
-  {
-    std::ofstream file(tmp, std::ios::binary);
-    file.write(out.data(), static_cast<std::streamsize>(out.size()));
-    if (!file) fail("cannot write '", tmp.string(), "'");
-  }
-  fs::rename(tmp, path);
+  write_file_atomic(path, out);
 }
 
 LbsResult lbs(const SmplModel& m, const torch::Tensor& poses, const torch::Tensor& shapes) {

@@ -81,7 +81,7 @@ void check_values(const YAML::Node& node, const std::string& path, const fs::pat
 constexpr size_t kMaxParents = 32;
 constexpr uintmax_t kMaxConfigBytes = uintmax_t{1} << 20;
 
-YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
+YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain, std::vector<fs::path>& named) {
   std::error_code ec;
   const fs::path canonical = fs::weakly_canonical(file, ec);
   refuse_special_file(file, "config file");
@@ -91,6 +91,7 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
   if (chain.size() >= kMaxParents)
     fail("config file '", file.string(), "': more than ", kMaxParents, " parent configs above it");
   chain.push_back(canonical);
+  named.push_back(file);
   if (const auto bytes = fs::file_size(file, ec); !ec && bytes > kMaxConfigBytes)
     fail("config file '", file.string(), "' is ", bytes, " bytes, more than a config may be (", kMaxConfigBytes, ")");
 
@@ -111,7 +112,7 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain) {
   if (!parent.IsDefined() || parent.IsNull()) return node;
   if (!parent.IsScalar()) fail("config file '", file.string(), "': 'parent' must be a file name");
   const fs::path parent_file = file.parent_path() / parent.as<std::string>();
-  YAML::Node merged = load_file_chain(parent_file, chain);
+  YAML::Node merged = load_file_chain(parent_file, chain, named);
   node.remove("parent");
   merge_into(merged, node);
   return merged;
@@ -134,9 +135,11 @@ size_t edit_distance(const std::string& a, const std::string& b) {
 
 }  // namespace
 
-YAML::Node load_tree(const fs::path& file, const std::vector<std::string>& overrides) {
-  std::vector<fs::path> chain;
-  YAML::Node tree = load_file_chain(file, chain);
+YAML::Node load_tree(const fs::path& file, const std::vector<std::string>& overrides,
+                     std::vector<fs::path>* files_read) {
+  std::vector<fs::path> chain, named;
+  YAML::Node tree = load_file_chain(file, chain, named);
+  if (files_read) files_read->insert(files_read->end(), named.begin(), named.end());
   for (const auto& o : overrides) apply_override(tree, o);
   return tree;
 }
@@ -200,15 +203,8 @@ void Reader::check_unknown() const {
 void write_yaml(const fs::path& file, const YAML::Node& tree) {
   YAML::Emitter out;
   out << tree;
-  const fs::path tmp = file.string() + ".tmp";
-  {
-    std::ofstream f(tmp);
-    if (!f) fail("cannot write '", tmp.string(), "'");
-    f << "# Resolved configuration: every option with the value this run used.\n"
-      << out.c_str() << "\n";
-    if (!f) fail("cannot write '", tmp.string(), "'");
-  }
-  fs::rename(tmp, file);
+  write_file_atomic(file, std::string("# Resolved configuration: every option with the value this run used.\n") +
+                              out.c_str() + "\n");
 }
 
 std::optional<int64_t> decimal_integer(const std::string& text) {

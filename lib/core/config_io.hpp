@@ -41,8 +41,10 @@ namespace th::config {
 
 // YAML tree of a config file with its parents merged in (key `parent: <file>`, relative to the
 // file that names it; chains allowed, cycles refused) and `a.b.c=value` overrides applied
-// (value parsed as YAML). An override whose parent path does not exist is refused.
-YAML::Node load_tree(const std::filesystem::path& file, const std::vector<std::string>& overrides);
+// (value parsed as YAML). An override whose parent path does not exist is refused. With
+// `files_read`, the config files read are appended to it as named: `file`, then its parents.
+YAML::Node load_tree(const std::filesystem::path& file, const std::vector<std::string>& overrides,
+                     std::vector<std::filesystem::path>* files_read = nullptr);
 // Applies one `a.b.c=value` override in place. Throws naming the override if malformed.
 void apply_override(YAML::Node& root, const std::string& override_text);
 

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "core/error.hpp"
 
@@ -33,20 +34,19 @@ inline void refuse_special_file(const std::filesystem::path& path, const std::st
 
 // True when `inner` is `outer` or lies inside it, both resolved first (absolute and normal, links
 // followed as far as the paths exist).
-inline bool path_within(const std::filesystem::path& inner, const std::filesystem::path& outer) {
-  auto resolved = [](const std::filesystem::path& p) {
-    std::error_code ec;
-    const auto c = std::filesystem::weakly_canonical(std::filesystem::absolute(p), ec);
-    return ec ? std::filesystem::absolute(p).lexically_normal() : c;
-  };
-  const auto in = resolved(inner), out = resolved(outer);
-  auto i = in.begin();
-  for (const auto& part : out) {
-    if (part.empty()) continue;  // a trailing separator
-    if (i == in.end() || *i != part) return false;
-    ++i;
-  }
-  return true;
-}
+bool path_within(const std::filesystem::path& inner, const std::filesystem::path& outer);
+// The same with the paths as given: absolute and normal, no link followed (a link inside a folder
+// lies inside it, wherever it points).
+bool path_within_as_given(const std::filesystem::path& inner, const std::filesystem::path& outer);
+
+// Writes `bytes` to `path` through a new temporary file in the same folder (created exclusively,
+// never through a link), renamed over `path`: readers never see a half-written file, and a link
+// at `path` is replaced, not written through. Throws th::Error naming the path.
+void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
+
+// A new, empty file beside `path` for a writer that needs a file name (a video encoder): created
+// exclusively (no link followed), named `<stem>.tmp<pid>.<n><extension>` so the extension still
+// says the format. Commit it with std::filesystem::rename over `path`.
+std::filesystem::path create_temporary_beside(const std::filesystem::path& path);
 
 }  // namespace th

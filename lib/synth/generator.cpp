@@ -16,6 +16,7 @@
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "core/progress.hpp"
 #include "core/runtime.hpp"
 #include "geometry/camera.hpp"
@@ -74,17 +75,12 @@ class LibraryThreads {
   int cv_;
 };
 
+// Every file through a new temporary file renamed over the target (never through a link).
 void write_bytes(const fs::path& path, const std::vector<uchar>& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-  if (!f) fail("cannot write '", path.string(), "'");
+  write_file_atomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
-void write_bytes(const fs::path& path, const std::string& bytes) {
-  std::ofstream f(path, std::ios::binary);
-  f.write(bytes.data(), std::streamsize(bytes.size()));
-  if (!f) fail("cannot write '", path.string(), "'");
-}
+void write_bytes(const fs::path& path, const std::string& bytes) { write_file_atomic(path, bytes); }
 
 void write_image(const fs::path& path, const cv::Mat& image, const std::vector<int>& params) {
   std::vector<uchar> bytes;
@@ -372,11 +368,7 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
                             r.person.description + "; motion: " + r.motion.script);
   }
 
-  {
-    std::ofstream f(out / "split.yaml");
-    f << split_yaml(c);
-    if (!f) fail("cannot write '", (out / "split.yaml").string(), "'");
-  }
+  write_bytes(out / "split.yaml", split_yaml(c));
 
   if (c.contact_sheet) {
     const int th = kTile * c.image.height / c.image.width;
@@ -392,11 +384,7 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   }
 
   // Written last: its presence marks a finished dataset.
-  {
-    std::ofstream f(out / kConfigFile);
-    f << text;
-    if (!f) fail("cannot write '", (out / kConfigFile).string(), "'");
-  }
+  write_bytes(out / kConfigFile, text);
 
   summary.people = P;
   summary.frames = c.frames;

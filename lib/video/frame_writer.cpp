@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/error.hpp"
+#include "core/files.hpp"
 #include "io/files.hpp"
 
 namespace th::video {
@@ -103,11 +104,20 @@ VideoResult FrameWriter::write_video(int n) const {
     if (!has_frame(i)) fail("frame '", frame_path(i).string(), "' is missing");
   const cv::Mat first = read_frame(frame_path(0));
   const std::string& f = options_.fourcc;
+  // The encoder writes a new file of ours, renamed over the video at the end: a link planted at
+  // the video's name is replaced, never written through, and no half-written video is left.
+  const std::filesystem::path tmp = create_temporary_beside(result.path);
+  struct Discard {
+    std::filesystem::path file;
+    ~Discard() {
+      std::error_code ignored;
+      if (!file.empty()) std::filesystem::remove(file, ignored);
+    }
+  } discard{tmp};
   cv::VideoWriter writer;
   {
     QuietOpenCV quiet;
-    writer.open(result.path.string(), cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]), options_.fps,
-                first.size(), true);
+    writer.open(tmp.string(), cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]), options_.fps, first.size(), true);
   }
   const std::string fallback =
       "; the " + std::to_string(n) + " frames are PNG files in '" + options_.dir.string() + "'";
@@ -125,11 +135,13 @@ VideoResult FrameWriter::write_video(int n) const {
   }
   writer.release();
   std::error_code ec;
-  if (!std::filesystem::exists(result.path, ec) ||
-      std::filesystem::file_size(result.path, ec) == 0) {
+  if (std::filesystem::file_size(tmp, ec) == 0 || ec) {
     result.message = "OpenCV opened but wrote nothing to '" + result.path.string() + "'" + fallback;
     return result;
   }
+  std::filesystem::rename(tmp, result.path, ec);
+  if (ec) fail("cannot write '", result.path.string(), "': ", ec.message());
+  discard.file.clear();
   result.written = true;
   result.message = "wrote '" + result.path.string() + "' (" + std::to_string(n) + " frames, " +
                    std::to_string(first.cols) + "x" + std::to_string(first.rows) + ", " + f +

@@ -40,14 +40,22 @@ trap 'rm -rf "$scratch"' EXIT
 mkdir -p "$scratch/used" && echo old > "$scratch/used/results.md"
 expect 2 "already holds 1 entry (results.md)" "$apps/transhuman-eval" --checkpoint x.pt --out "$scratch/used" "${tiny[@]}"
 expect 2 "already holds 1 entry (results.md)" "$apps/transhuman-train" --dry-run --out "$scratch/used" "${tiny[@]}"
-"$apps/transhuman-train" --dry-run --out "$scratch/run" "${tiny[@]}" >/dev/null 2>&1
+"$apps/transhuman-train" --max-steps 0 --out "$scratch/run" "${tiny[@]}" train.val_views=0 >/dev/null 2>&1
 expect 2 "model.dparf.nk (run: 7, now: 1)" "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" model.dparf.nk=1
 if "$apps/transhuman-train" --dry-run --resume --out "$scratch/run" "${tiny[@]}" train.lr=1e-4 >/dev/null 2>&1; then
   echo "ok: --resume with an unchanged model section"
 else
   echo "FAIL: --resume with only a training key changed was refused"; failures=$((failures + 1))
 fi
-if "$apps/transhuman-train" --dry-run --force --out "$scratch/used" "${tiny[@]}" >/dev/null 2>&1 && [[ ! -e "$scratch/used/results.md" ]]; then
+# A dry run writes nothing, --force or not; a run with --force replaces the folder's contents.
+if "$apps/transhuman-train" --dry-run --force --out "$scratch/used" "${tiny[@]}" >/dev/null 2>&1 &&
+   [[ -e "$scratch/used/results.md" && ! -e "$scratch/used/.lock" && ! -e "$scratch/used/config.yaml" ]]; then
+  echo "ok: --dry-run --force leaves the folder as it was"
+else
+  echo "FAIL: --dry-run --force touched the folder"; failures=$((failures + 1))
+fi
+if "$apps/transhuman-train" --max-steps 0 --force --out "$scratch/used" "${tiny[@]}" train.val_views=0 >/dev/null 2>&1 &&
+   [[ ! -e "$scratch/used/results.md" ]]; then
   echo "ok: --force replaces the folder's contents"
 else
   echo "FAIL: --force"; failures=$((failures + 1))
