@@ -11,6 +11,7 @@
 #include <ctime>
 #include <fstream>
 #include <map>
+#include <set>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -165,13 +166,58 @@ std::string href(const fs::path& path, const fs::path& out) {
   return s;
 }
 
+// out/<rel>, checked before anything is written there: it lies inside `out` once normalised (no
+// ".." leads out of it), and no folder or file on the way from `out` is a symbolic link (a link
+// would carry the write elsewhere). Throws th::Error naming the path.
+fs::path destination(const fs::path& out, const fs::path& rel) {
+  const fs::path root = fs::absolute(out).lexically_normal();
+  const fs::path target = (root / rel).lexically_normal();
+  const fs::path inside = target.lexically_relative(root);
+  if (rel.empty() || rel.is_absolute() || inside.empty() || *inside.begin() == ".." ||
+      *inside.begin() == ".")
+    fail("report: '", (out / rel).string(), "' would lie outside --out '", out.string(),
+         "'; nothing is written there");
+  fs::path at = root;
+  for (const auto& part : inside) {
+    at /= part;
+    std::error_code ec;
+    if (fs::is_symlink(fs::symlink_status(at, ec)))
+      fail("report: '", at.string(),
+           "' in --out is a symbolic link; the report does not write through it");
+  }
+  return target;
+}
+
 // `src` itself when it already lies inside `out`, else a copy at out/<dest>.
 fs::path bring_in(const fs::path& src, const fs::path& out, const fs::path& dest) {
   if (path_within(src, out)) return src;
-  const fs::path target = out / dest;
+  const fs::path target = destination(out, dest);
   fs::create_directories(target.parent_path());
   fs::copy_file(src, target, fs::copy_options::overwrite_existing);
   return target;
+}
+
+// The names the page's own files take in `out`: an evaluation's copy never lands on them.
+const std::set<std::string> kPageFiles{"index.html", "report.js", "report.css",
+                                       "mesh.js",    "three",     "orbit"};
+
+// The name a copy of `src` (an evaluation folder, the mesh) takes in `out`: the resolved path's
+// own name ("e" for "runs/e/", "runs/e/images/..", or a link to runs/e), made unique among
+// `taken` with a suffix ("e-2", "p-2.ply") and added to it.
+std::string copy_name(const fs::path& src, std::set<std::string>& taken) {
+  std::error_code ec;
+  fs::path resolved = fs::weakly_canonical(fs::absolute(src), ec);
+  if (ec) resolved = fs::absolute(src).lexically_normal();
+  if (!resolved.has_filename()) resolved = resolved.parent_path();  // a trailing separator
+  const bool folder = fs::is_directory(resolved, ec);
+  std::string base = resolved.filename().string();
+  if (base.empty() || base == "." || base == "..") base = folder ? "eval" : "file";
+  const std::string extension = folder ? "" : fs::path(base).extension().string();
+  const std::string stem = base.substr(0, base.size() - extension.size());
+  std::string name = base;
+  for (int n = 2; taken.count(name); ++n) name = stem + "-" + std::to_string(n) + extension;
+  taken.insert(name);
+  return name;
 }
 
 // The human, frame and view of each row of per_image.csv (the columns the evaluator writes first).
@@ -256,7 +302,7 @@ std::string eval_js(const fs::path& eval, const fs::path& out, const std::string
 
 // Writes report.js and report.css (our own page script and style) into `out`.
 void write_assets(const fs::path& out) {
-  for (const auto& [name, text] : detail::assets()) write_text(out / name, text);
+  for (const auto& [name, text] : detail::assets()) write_text(destination(out, name), text);
 }
 
 // Copies libjs-three's scripts into out/three/; returns the <script> tags, or "" without them.
@@ -266,10 +312,11 @@ std::string bring_three_js(const fs::path& out) {
     spdlog::warn("report: three.js not found (Debian: apt-get install libjs-three); the page has no 3D viewer");
     return "";
   }
-  fs::create_directories(out / "three");
   std::string tags;
   for (const auto& [name, rel] : kThreeFiles) {
-    fs::copy_file(root / rel, out / "three" / name, fs::copy_options::overwrite_existing);
+    const fs::path target = destination(out, fs::path("three") / name);
+    fs::create_directories(target.parent_path());
+    fs::copy_file(root / rel, target, fs::copy_options::overwrite_existing);
     tags += "<script src=\"three/" + name + "\"></script>\n";
   }
   return tags;
@@ -385,12 +432,14 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   fs::create_directories(out);
   std::string evals = "[";
   bool evaluation_folder = false;  // the page of the evaluation in `out` itself
+  std::set<std::string> taken = kPageFiles;  // and the mesh's copy
+  const std::string mesh_name = sources.mesh.empty() ? "" : copy_name(sources.mesh, taken);
   for (size_t i = 0; i < sources.evals.size(); ++i) {
     const fs::path& dir = sources.evals[i];
     if (!fs::is_directory(dir)) fail("report: no evaluation folder '", dir.string(), "'");
     const bool here = fs::equivalent(dir, out);
     evaluation_folder = evaluation_folder || here;
-    const std::string name = here ? "." : dir.filename().string();
+    const std::string name = here ? "." : copy_name(dir, taken);
     evals += (i ? "," : "") + eval_js(dir, out, name);
   }
   evals += "]";
@@ -416,10 +465,12 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   std::string scripts;
   if (!sources.mesh.empty()) {
     const std::string ply = read_text(sources.mesh, "mesh");
-    const fs::path copy = bring_in(sources.mesh, out, sources.mesh.filename());
-    write_text(out / "mesh.js", "// " + sources.mesh.filename().string() +
-                                    " (binary PLY) for the viewer: a file:// page may not fetch it.\n"
-                                    "window.TH_MESH_PLY = \"" + base64(ply) + "\";\n");
+    const fs::path copy = bring_in(sources.mesh, out, mesh_name);
+    write_text(destination(out, "mesh.js"),
+               "// " + sources.mesh.filename().string() +
+                   " (binary PLY) for the viewer: a file:// page may not fetch it.\n"
+                   "window.TH_MESH_PLY = \"" +
+                   base64(ply) + "\";\n");
     const std::string three = bring_three_js(out);
     data += ",mesh:{file:" + js_string(href(copy, out)) + ",viewer:" + (three.empty() ? "false" : "true") + "}";
     scripts = three + "<script src=\"mesh.js\"></script>\n";
@@ -432,7 +483,8 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
 
   write_assets(out);
   const fs::path page = out / "index.html";
-  write_text(page, page_html(sources.title, data, scripts, evaluation_folder));
+  write_text(destination(out, "index.html"),
+             page_html(sources.title, data, scripts, evaluation_folder));
   return page;
 }
 
@@ -456,7 +508,7 @@ fs::path write_ablation_page(const std::vector<AblationRow>& rows, const std::st
   const std::string data = "{" + common_js("ablation", "") + ",rows:" + list + ",links:[]}";
   write_assets(out);
   const fs::path page = out / "index.html";
-  write_text(page, page_html(title, data, ""));
+  write_text(destination(out, "index.html"), page_html(title, data, ""));
   return page;
 }
 

@@ -29,8 +29,12 @@ struct PageSources {
 
 // Writes <out>/index.html, report.js and report.css, and with a mesh three/*.js and mesh.js.
 // What the page shows from outside `out` (evaluation panels, orbit frames, video, the .ply) is
-// copied in, so the folder is self-contained. Returns the page's path. A missing summary.json
-// or per_image.csv is a th::Error naming the file; without libjs-three the viewer says so.
+// copied in, so the folder is self-contained: an evaluation folder to out/<its name>, the name
+// of the folder it resolves to ("e" for "runs/e/" or "runs/e/x/.."), made unique with a suffix
+// ("e-2") and never one of the page's own files. Every file is written inside `out` and never
+// through a symbolic link found there (a th::Error naming it). Returns the page's path. A
+// missing summary.json or per_image.csv is a th::Error naming the file; without libjs-three the
+// viewer says so.
 std::filesystem::path write_page(const PageSources& sources, const std::filesystem::path& out);
 
 // One row of an ablation table: a configs/ablations/<name>.yaml run and its evaluation.

@@ -1,7 +1,7 @@
 // The page writer without a browser: escaping, what index.html embeds, what the folder holds.
 #include <catch2/catch.hpp>
-
 #include <fstream>
+#include <map>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -145,4 +145,79 @@ TEST_CASE("an ablation page holds every row and links each row's own page", "[re
   CHECK_THAT(html, Catch::Contains("name:\"fdi_wo_h\""));
   CHECK_THAT(html, Catch::Contains("page:\"./full/eval_identity/index.html\""));
   CHECK_THAT(html, Catch::Contains("train_seconds:null"));
+}
+
+namespace {
+
+// Every file under `dir` with its contents, for "nothing else changed" checks.
+std::map<std::string, std::string> snapshot(const fs::path& dir) {
+  std::map<std::string, std::string> files;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) files[fs::relative(e.path(), dir).string()] = read_all(e.path());
+  return files;
+}
+
+}  // namespace
+
+TEST_CASE(
+    "an evaluation's copy is named by its resolved folder, uniquely, and never lands outside --out",
+    "[report]") {
+  const fs::path root = th::test::scratch_dir("report_copy_names");
+  write(root / "run" / "config.yaml", "the run's own config\n");
+  fake_eval(root / "e");
+  write(root / "e" / "config.yaml", "the evaluation's config\n");
+  th::report::PageSources sources;
+
+  // A trailing separator: the copy goes to out/e, not into out itself.
+  sources.evals = {root / "e" / ""};
+  th::report::write_page(sources, root / "run");
+  CHECK(read_all(root / "run" / "config.yaml") == "the run's own config\n");
+  CHECK(read_all(root / "run" / "e" / "config.yaml") == "the evaluation's config\n");
+
+  // ".." is resolved: the folder's own name, inside --out; nothing beside the page's folder.
+  fs::create_directories(root / "c");
+  sources.evals = {root / "e" / "images" / ".."};
+  th::report::write_page(sources, root / "c" / "page");
+  CHECK(fs::exists(root / "c" / "page" / "e" / "summary.json"));
+  CHECK(std::vector<fs::path>(fs::directory_iterator(root / "c"), {}) ==
+        std::vector<fs::path>{root / "c" / "page"});
+
+  // Two folders with the same name: two copies, each page entry showing its own images.
+  fake_eval(root / "a" / "e");
+  fake_eval(root / "b" / "e");
+  write(root / "a" / "e" / "images" / "CoreView_s03_f0000_v03.png", "a's panel");
+  write(root / "b" / "e" / "images" / "CoreView_s03_f0000_v03.png", "b's panel");
+  sources.evals = {root / "a" / "e", root / "b" / "e"};
+  const std::string html = read_all(th::report::write_page(sources, root / "two"));
+  CHECK(read_all(root / "two" / "e" / "images" / "CoreView_s03_f0000_v03.png") == "a's panel");
+  CHECK(read_all(root / "two" / "e-2" / "images" / "CoreView_s03_f0000_v03.png") == "b's panel");
+  CHECK_THAT(html, Catch::Contains("name:\"e\"") && Catch::Contains("name:\"e-2\""));
+  CHECK_THAT(html, Catch::Contains("\"./e-2/images/CoreView_s03_f0000_v03.png\""));
+
+  // A folder named like one of the page's own files takes another name.
+  fake_eval(root / "x" / "orbit");
+  sources.evals = {root / "x" / "orbit"};
+  th::report::write_page(sources, root / "named");
+  CHECK(fs::exists(root / "named" / "orbit-2" / "summary.json"));
+}
+
+TEST_CASE("the report writes nothing through a link in --out", "[report]") {
+  const fs::path root = th::test::scratch_dir("report_links");
+  fake_eval(root / "e");
+  write(root / "elsewhere" / "keep.txt", "kept");
+  fs::create_directories(root / "out");
+  fs::create_directory_symlink(root / "elsewhere", root / "out" / "e");
+  const auto before = snapshot(root / "elsewhere");
+  th::report::PageSources sources;
+  sources.evals = {root / "e"};
+  CHECK_THROWS_WITH(
+      th::report::write_page(sources, root / "out"),
+      Catch::Contains("'" + (root / "out" / "e").string() + "' in --out is a symbolic link"));
+  CHECK(snapshot(root / "elsewhere") == before);
+  // A link in place of one of the page's files: refused too, its target unchanged.
+  fs::remove(root / "out" / "e");
+  fs::create_symlink(root / "elsewhere" / "keep.txt", root / "out" / "report.js");
+  CHECK_THROWS_WITH(th::report::write_page(sources, root / "out"),
+                    Catch::Contains("is a symbolic link"));
+  CHECK(read_all(root / "elsewhere" / "keep.txt") == "kept");
 }
