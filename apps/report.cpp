@@ -1,7 +1,11 @@
 // transhuman-report: the HTML report page of the demo (scores, training curve, orbit, mesh
 // viewer, gallery) or of an ablation run (rows side by side). transhuman-eval writes its own.
+#include <fcntl.h>
 #include <spdlog/spdlog.h>
+#include <sys/file.h>
+#include <unistd.h>
 
+#include <cerrno>
 #include <fstream>
 #include <iostream>
 
@@ -23,6 +27,29 @@ std::string describe(const fs::path& config) {
       return start == std::string::npos ? "" : line.substr(start);
     }
   return "";
+}
+
+// Refuses an input folder that a running command is writing (it holds the folder's lock,
+// th::app::lock_run_dir): its results are not finished. Only looks: the lock file is neither made
+// nor written, and the lock is not kept.
+void refuse_folder_in_use(const fs::path& dir, const std::string& what) {
+  const fs::path file = dir / ".lock";
+  const int fd = ::open(file.c_str(), O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC);
+  if (fd < 0) return;  // no lock file: no writer
+  const bool busy = ::flock(fd, LOCK_SH | LOCK_NB) != 0 && errno == EWOULDBLOCK;
+  ::close(fd);
+  if (!busy) return;
+  std::string holder;
+  std::getline(std::ifstream(file), holder);
+  th::fail(what, " '", dir.string(), "' is in use by ", holder.empty() ? "another process" : holder,
+           ": its results are not finished (wait for it to end)");
+}
+
+// Takes the lock of the report's folder (made when missing) for as long as the report runs: a
+// running evaluation or another report in the same folder refuses it, naming its holder.
+void lock_report_folder(const fs::path& out) {
+  fs::create_directories(out);
+  th::app::lock_run_dir(out, "transhuman-report");
 }
 
 double train_seconds(const fs::path& train_done) {
@@ -74,6 +101,8 @@ int main(int argc, char** argv) {
         if (eq == std::string::npos) th::fail("--link '", link, "': expected LABEL=HREF");
         sources.links.emplace_back(link.substr(0, eq), link.substr(eq + 1));
       }
+      for (const auto& e : sources.evals) refuse_folder_in_use(e, "evaluation folder (--eval)");
+      lock_report_folder(out);
       written = th::report::write_page(sources, out);
     } else {
       std::vector<th::report::AblationRow> list;
@@ -82,6 +111,8 @@ int main(int argc, char** argv) {
         list.push_back({row, describe(fs::path(configs) / (row + ".yaml")), run / ("eval_" + setting),
                         train_seconds(run / "train_done")});
       }
+      for (const auto& row : list) refuse_folder_in_use(row.eval, "evaluation folder");
+      lock_report_folder(root);
       written = th::report::write_ablation_page(list, title.empty() ? "TransHuman ablations (" + setting + ")" : title, root);
     }
     std::cout << "report: " << written.string() << "\n";
