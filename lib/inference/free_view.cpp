@@ -9,12 +9,14 @@
 #include <optional>
 #include <sstream>
 
+#include "core/config_io.hpp"
 #include "core/error.hpp"
-#include "core/resources.hpp"
 #include "core/progress.hpp"
+#include "core/resources.hpp"
 #include "dist/communicator.hpp"
 #include "dist/shard.hpp"
 #include "io/files.hpp"
+#include "model/precision.hpp"
 #include "video/contact_sheet.hpp"
 #include "video/frame_writer.hpp"
 
@@ -64,11 +66,51 @@ std::vector<int> parse_frame_range(const std::string& text) {
 
 namespace {
 
-// What makes two runs' frames interchangeable; written to request.yaml.
-std::string describe(const VideoRequest& r, const std::string& checkpoint, const std::string& human,
+// Keys of the config that do not change a frame's pixels: training only, where caches live,
+// what is checked rather than computed, and the loader's threads. Every other data.*, model.*
+// and render.* key is part of a request (a key added later counts until it is listed here).
+bool changes_pixels(const std::string& key) {
+  static const std::vector<std::string> kNot{"data.train_setting",
+                                             "data.test_setting",
+                                             "data.calibration_check",
+                                             "data.border_band",
+                                             "data.patch.",
+                                             "data.jitter.",
+                                             "data.workers",
+                                             "data.prefetch",
+                                             "model.encoder.pretrained",
+                                             "model.grouping.cache_dir",
+                                             "render.train_chunk_points",
+                                             "render.train_recompute"};
+  for (const auto& k : kNot)
+    if (key == k || (k.back() == '.' && key.rfind(k, 0) == 0)) return false;
+  return true;
+}
+
+// The config's paths, absolute and normal (the same files however they were named); an empty
+// path (the documented default) and "compute" stay as they are.
+std::map<std::string, std::string> config_paths(const Config& c) {
+  std::map<std::string, std::string> paths{
+      {"data.root", c.data.root},
+      {"data.split_file", c.data.split_file},
+      {"data.smpl_model", c.data.smpl_model},
+      {"data.visibility_root", c.data.visibility_root},
+      {"model.grouping.kmeans_file", c.model.grouping.kmeans_file}};
+  for (auto& [key, value] : paths)
+    if (!value.empty() && value != kKMeansCompute)
+      value = fs::absolute(value).lexically_normal().string();
+  return paths;
+}
+
+// What makes two runs' frames interchangeable; written to request.yaml. Beside the request
+// itself (person, frames, cameras, size, checkpoint), every setting that changes the pixels:
+// the precision the products resolve to on this device, the split setting (its reference views)
+// and the data, model and render keys of changes_pixels.
+std::string describe(const Session& session, const VideoRequest& r, const std::string& human,
                      const std::vector<int>& frames, int width, int height, int count) {
+  const Config& c = session.config();
   YAML::Emitter y;
-  y << YAML::BeginMap << YAML::Key << "checkpoint" << YAML::Value << checkpoint;
+  y << YAML::BeginMap << YAML::Key << "checkpoint" << YAML::Value << session.checkpoint_id();
   y << YAML::Key << "human" << YAML::Value << human;
   y << YAML::Key << "frames" << YAML::Value << YAML::Flow << frames;
   const char* kind = r.cameras == VideoRequest::Cameras::Orbit      ? "orbit"
@@ -76,12 +118,56 @@ std::string describe(const VideoRequest& r, const std::string& checkpoint, const
                                                                     : "dataset_camera";
   y << YAML::Key << "cameras" << YAML::Value << kind;
   if (r.cameras == VideoRequest::Cameras::PathFile)
-    y << YAML::Key << "path_file" << YAML::Value << fs::absolute(r.path_file).string();
+    y << YAML::Key << "path_file" << YAML::Value
+      << fs::absolute(r.path_file).lexically_normal().string();
   if (r.cameras == VideoRequest::Cameras::Dataset) y << YAML::Key << "camera" << YAML::Value << r.camera;
   if (r.cameras == VideoRequest::Cameras::Orbit) y << YAML::Key << "view" << YAML::Value << r.view;
   y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value << height;
-  y << YAML::Key << "video_frames" << YAML::Value << count << YAML::EndMap;
+  y << YAML::Key << "video_frames" << YAML::Value << count;
+  y << YAML::Key << "settings" << YAML::Value << YAML::BeginMap;
+  y << YAML::Key << "precision" << YAML::Value
+    << model::resolve_products(c.precision, c.fp32_products, session.device()).describe();
+  y << YAML::Key << "eval.setting" << YAML::Value << c.eval.setting;
+  const YAML::Node tree = config::to_tree(c);
+  const auto paths = config_paths(c);
+  for (const char* section : {"data", "model", "render"})
+    for (const auto& [key, value] : config::leaves(tree[section], section)) {
+      if (!changes_pixels(key)) continue;
+      const auto path = paths.find(key);
+      y << YAML::Key << key << YAML::Value << (path != paths.end() ? path->second : value);
+    }
+  y << YAML::EndMap << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
+}
+
+// The keys whose values differ between the request that made a folder's frames (`before`, the
+// text of its request.yaml) and this one, as "key (frames: A, now: B)", at most four then a
+// count; empty when `before` cannot be read.
+std::string request_differences(const std::string& before, const std::string& now) {
+  std::map<std::string, std::string> old_keys, new_keys;
+  try {
+    old_keys = config::leaves(YAML::Load(before), "");
+    new_keys = config::leaves(YAML::Load(now), "");
+  } catch (const YAML::Exception&) {
+    return "";
+  }
+  std::vector<std::string> named;
+  auto name = [](const std::string& key) {
+    return key.rfind("settings.", 0) == 0 ? key.substr(9) : key;
+  };
+  for (const auto& [key, value] : new_keys) {
+    const auto it = old_keys.find(key);
+    if (it == old_keys.end())
+      named.push_back(name(key) + " (frames: not recorded, now: " + value + ")");
+    else if (it->second != value)
+      named.push_back(name(key) + " (frames: " + it->second + ", now: " + value + ")");
+  }
+  for (const auto& [key, value] : old_keys)
+    if (!new_keys.count(key)) named.push_back(name(key) + " (frames: " + value + ", now: not set)");
+  std::string text;
+  for (size_t i = 0; i < named.size() && i < 4; ++i) text += (i ? ", " : "") + named[i];
+  if (named.size() > 4) text += " and " + std::to_string(named.size() - 4) + " more";
+  return text;
 }
 
 }  // namespace
@@ -183,13 +269,24 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
   summary.frames_dir = frames_dir;
   if (writes) {
     fs::create_directories(out_dir);
+    // Frames are resumed only under the request that made them: another one (a setting that
+    // changes pixels included) is refused by name, or with `force` its frames are rendered again.
     const fs::path request_file = out_dir / "request.yaml";
     const std::string wanted =
-        describe(request, session.checkpoint_id(), human.name(), frames, width, height, count);
-    if (fs::exists(request_file) && io::read_file(request_file) != wanted) {
-      if (!request.force)
-        fail("'", out_dir.string(), "' holds frames of another request (see ", request_file.string(),
-             "); use another --out or --force to replace them");
+        describe(session, request, human.name(), frames, width, height, count);
+    const bool known = fs::exists(request_file);
+    const std::string before = known ? io::read_file(request_file) : "";
+    if (known ? before != wanted : fs::exists(frames_dir)) {
+      if (!request.force && !known)
+        fail("'", out_dir.string(),
+             "' holds frames/ without the request.yaml that says what made them; use "
+             "another --out, or --force to render them again");
+      if (!request.force) {
+        const std::string changed = request_differences(before, wanted);
+        fail("'", out_dir.string(), "' holds frames of another request",
+             changed.empty() ? "" : ": " + changed, " (see ", request_file.string(),
+             "); use another --out, or --force to render them again");
+      }
       fs::remove_all(frames_dir);
     }
     io::write_file_atomic(request_file, wanted);

@@ -4,8 +4,9 @@
 // the setting's fixed reference views. Cameras: the orbit of METHOD 7, a camera path file
 // (video/camera_path.hpp), or one dataset camera. Output: PNG frames, an mp4 at 30 fps, the
 // camera path as a file, a contact sheet. Resumable: frames already written are skipped, as
-// long as the request (checkpoint included) is the same one (request.yaml in the output folder
-// says which).
+// long as the request is the same one: person, frames, cameras, size, the checkpoint, and every
+// setting that changes pixels (precision, eval.setting, the data, model and render keys;
+// request.yaml in the output folder says which).
 
 #include <filesystem>
 #include <string>
@@ -62,7 +63,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request);
 // Video frame k shows body frame frames[k % F] from camera cameras[k % C]; the video has
 // max(F, C) frames. The orbit looks at the centre of each frame's body box. Throws th::Error
 // for a bad request (unknown person, frame or camera out of range, unreadable path file, an
-// output folder holding another request's frames without `force`).
+// output folder holding another request's frames without `force`, naming what differs; with
+// `force` those frames are removed and rendered again).
 //
 // With `comm` (several ranks), the frames still to render are split over the ranks; rank 0
 // (whose `out_dir` is the output folder: the others pass an empty one and write nothing)

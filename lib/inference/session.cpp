@@ -33,7 +33,8 @@ std::string Session::checkpoint_id() const {
   std::error_code ec;
   const auto bytes = fs::file_size(checkpoint_, ec);
   const auto modified = fs::last_write_time(checkpoint_, ec).time_since_epoch().count();
-  return checkpoint_.string() + " (" + std::to_string(bytes) + " bytes, modified " + std::to_string(modified) + ")";
+  return fs::absolute(checkpoint_).lexically_normal().string() + " (" + std::to_string(bytes) +
+         " bytes, modified " + std::to_string(modified) + ")";
 }
 
 int Session::find_human(const std::string& name) const {

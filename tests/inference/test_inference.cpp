@@ -166,6 +166,63 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, r
   }
 }
 
+TEST_CASE(
+    "frames are resumed only under the settings that made their pixels; another is named, or "
+    "forced",
+    "[inference][video]") {
+  const fs::path out = th::test::scratch_dir("inference_settings");
+  VideoRequest request;
+  request.orbit_views = 2;
+  request.width = 24;
+  request.height = 24;
+  const auto render = [&](const std::vector<std::string>& overrides) {
+    auto config = tiny_config();
+    YAML::Node tree = th::config::to_tree(config);
+    for (const auto& o : overrides) th::config::apply_override(tree, o);
+    config = th::config::from_tree<th::Config>(tree);
+    const th::inference::Session session(config, torch::kCPU, tiny_checkpoint());
+    return th::inference::render_video(session, request, out);
+  };
+  const auto frame = [&] {
+    std::ifstream in(out / "frames" / "frame_0000.png", std::ios::binary);
+    return std::string((std::istreambuf_iterator<char>(in)), {});
+  };
+  REQUIRE(render({}).rendered == 2);
+  const std::string first = frame();
+  // Each setting that changes pixels is named with the frames' value and the new one; nothing is
+  // resumed and the frames stay as they were.
+  const std::vector<std::pair<std::string, std::string>> changes{
+      {"render.samples=4", "render.samples (frames: 8, now: 4)"},
+      {"precision=bf16", "precision (frames: fp32"},
+      {"render.progressive=false", "render.progressive (frames: true, now: false)"},
+      {"model.dparf.softmax_temperature=0.25",
+       "model.dparf.softmax_temperature (frames: 0.5, now: 0.25)"},
+      {"data.ratio=0.125", "data.ratio (frames: 0.25, now: 0.125)"},
+      {"eval.setting=pose", "eval.setting (frames: identity, now: pose)"}};
+  for (const auto& [override_text, named] : changes) {
+    CAPTURE(override_text);
+    CHECK_THROWS_WITH(render({override_text, "eval.model_mismatch=warn"}),
+                      Catch::Contains("holds frames of another request: ") &&
+                          Catch::Contains(named) && Catch::Contains("--force"));
+  }
+  CHECK(frame() == first);
+  // What does not change pixels resumes: threads, the loader, training-only keys, where caches
+  // live.
+  const auto resumed =
+      render({"threads=2", "data.workers=2", "render.train_chunk_points=512", "train.lr=1e-3"});
+  CHECK(resumed.rendered == 0);
+  CHECK(resumed.skipped == 2);
+  // --force renders them again under the new settings.
+  request.force = true;
+  CHECK(render({"render.samples=4"}).rendered == 2);
+  CHECK(frame() != first);
+  // frames/ without the request.yaml that says what made them: refused, not resumed.
+  request.force = false;
+  fs::remove(out / "request.yaml");
+  CHECK_THROWS_WITH(render({"render.samples=4"}),
+                    Catch::Contains("holds frames/ without the request.yaml"));
+}
+
 TEST_CASE("bad render requests name the person, frame or camera", "[inference][video]") {
   const th::inference::Session session(tiny_config(), torch::kCPU, tiny_checkpoint());
   const fs::path out = th::test::scratch_dir("inference_bad");
