@@ -35,8 +35,11 @@ std::optional<int> launch_ranks(int nproc, const CommonOptions& options, int arg
   dist::LaunchOptions launch;
   launch.nproc = nproc;
   launch.timeout_s = config.train.dist_timeout_s;
-  const int code = dist::launch_local(dist::worker_args(argc, argv, options.out.empty() ? default_out : ""), launch);
-  if (code != 0) std::cerr << app << ": error: a rank failed (see above)" << std::endl;
+  // The failing rank's own error line ends the output; a rank that died without one is named here.
+  std::string failure;
+  const int code = dist::launch_local(
+      dist::worker_args(argc, argv, options.out.empty() ? default_out : ""), launch, &failure);
+  if (code != 0 && !failure.empty()) std::cerr << app << ": error: " << failure << std::endl;
   return code;
 }
 

@@ -26,8 +26,9 @@ std::string rank_app_name(const std::string& app);
 
 // With --nproc N > 1 (and not a dry run): starts N local ranks of this program with the same
 // arguments (and the same --out, `default_out` when none was given), waits for them and
-// returns the exit code. nullopt when this process is to do the work itself. Refuses --nproc
-// inside a launcher, and more than 8 ranks per core.
+// returns the exit code. The first rank to fail ends the others at once, and its error line
+// ("transhuman-train[rank 0]: error: ...") is the last line printed. nullopt when this process
+// is to do the work itself. Refuses --nproc inside a launcher, and more than 8 ranks per core.
 std::optional<int> launch_ranks(int nproc, const CommonOptions& options, int argc, char** argv,
                                 const std::string& app, const std::string& default_out);
 

@@ -522,3 +522,89 @@ TEST_CASE("a stop signal to the --nproc launcher reaches every rank, and ranks d
     }
   }
 }
+
+namespace {
+
+// The non-empty lines of `text`.
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);)
+    if (!line.empty()) out.push_back(line);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("a user error only rank 0 sees ends every --nproc rank at once, its error line last",
+          "[dist]") {
+  // The others would wait train.dist_timeout_s for it at the rendezvous: far longer than the
+  // generous deadline below.
+  const fs::path dir = th::test::scratch_dir("dist_rank0_error");
+  fs::create_directories(dir / "run");
+  std::ofstream(dir / "run" / "notes.txt") << "someone else's\n";  // only rank 0 claims --out
+  const auto args =
+      train_command(dir / "run", {"--nproc", "2"}, tiny_overrides({"train.dist_timeout_s=600"}));
+  const auto t0 = std::chrono::steady_clock::now();
+  const Process launcher = th::test::spawn(args, {}, dir / "launcher.log");
+  const auto status = th::test::wait_for(launcher, 60);
+  if (!status) th::test::kill_and_reap(launcher);
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const std::string log = th::test::read_text(dir / "launcher.log");
+  INFO(log);
+  REQUIRE(status.has_value());
+  CHECK(describe(*status) == "exit 2");
+  CHECK(seconds < 60);
+  const auto lines = lines_of(log);
+  REQUIRE_FALSE(lines.empty());
+  CHECK_THAT(lines.back(), Catch::StartsWith("transhuman-train[rank 0]: error: --out '") &&
+                               Catch::Contains("already holds 1 entr") &&
+                               Catch::Contains("(notes.txt)"));
+  size_t errors = 0;
+  for (const auto& line : lines) errors += line.find("error:") != std::string::npos;
+  CHECK(errors == 1);  // neither rank 1's rendezvous error nor "a rank failed"
+  CHECK(log.find("c10d") == std::string::npos);
+  CHECK(th::test::read_text(dir / "run" / "notes.txt") == "someone else's\n");
+}
+
+TEST_CASE("the launcher reports the rank's own error, not the others' that follow from it",
+          "[dist]") {
+  // Rank 1 reports that rank 0 went away and ends first; rank 0's own error comes later: it is
+  // the last line. A rank killed without a word is named by the launcher.
+  const fs::path dir = th::test::scratch_dir("dist_launcher_lines");
+  const std::string script =
+      "if [ \"$RANK\" = 0 ]; then sleep 0.5; echo 'w[rank 0]: error: the real cause' >&2; exit 2; "
+      "fi; "
+      "echo 'w[rank 1]: error: rank 1 of 2: broadcasting the frames failed: Connection closed' "
+      ">&2; exit 2";
+  const int saved = ::dup(2);
+  const fs::path log = dir / "launcher.log";
+  const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  ::dup2(fd, 2);
+  std::string failure = "unset";
+  th::dist::LaunchOptions options;
+  options.nproc = 2;
+  const int code = th::dist::launch_local({"/bin/sh", "-c", script}, options, &failure);
+  ::dup2(saved, 2);
+  ::close(fd);
+  ::close(saved);
+  const std::string text = th::test::read_text(log);
+  INFO(text);
+  CHECK(code == 2);
+  CHECK(failure.empty());
+  const auto lines = lines_of(text);
+  REQUIRE_FALSE(lines.empty());
+  CHECK(lines.back() == "w[rank 0]: error: the real cause");
+  CHECK(text.find("Connection closed") == std::string::npos);
+
+  options.nproc = 2;
+  const auto t0 = std::chrono::steady_clock::now();
+  const int killed = th::dist::launch_local(
+      {"/bin/sh", "-c", "if [ \"$RANK\" = 1 ]; then kill -9 $$; fi; exec sleep 100"}, options,
+      &failure);
+  CHECK(killed == 128 + SIGKILL);
+  CHECK(failure == "rank 1 was killed by signal 9 (Killed)");
+  CHECK(std::chrono::steady_clock::now() - t0 <
+        std::chrono::seconds(30));  // rank 0 stopped, not waited for
+}
