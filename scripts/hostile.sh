@@ -685,6 +685,82 @@ check "train --resume in a run whose metrics.jsonl is a link" 2 "holds 'metrics.
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run_linked" --resume
 unchanged "  ... the file the links pointed at" "$work/outside.txt" "$outside"
 
+# ---- report folders, render requests and failing ranks ---------------------------------------------
+# Names derived from --eval paths: normalised (trailing separator, ".."), unique, inside --out.
+cp -r "$work/run" "$work/rep_run" && rm -f "$work/rep_run/.lock"
+run_cfg=$(sum_of "$work/rep_run/config.yaml")
+check_ok "report --eval <folder>/ --out <a training run>" \
+  "$apps/transhuman-report" page --out "$work/rep_run" --eval "$work/e_good/"
+unchanged "  ... the run's config.yaml (the copy went to rep_run/e_good/)" "$work/rep_run/config.yaml" "$run_cfg"
+kept "  ... the evaluation's copy in its own folder" "$work/rep_run/e_good/config.yaml" "$work/rep_run/e_good/summary.json"
+mkdir -p "$work/twin_a" "$work/twin_b"
+cp -r "$work/e_good" "$work/twin_a/e" && cp -r "$work/e_good" "$work/twin_b/e"
+"$py" -c "import sys, numpy as np, cv2; cv2.imwrite(sys.argv[1], np.zeros((8, 8, 3), np.uint8))" \
+  "$(ls "$work/twin_b/e/images/"*.png | head -1)"
+check_ok "report with two --eval folders of the same name" \
+  "$apps/transhuman-report" page --out "$work/rep_twins" --eval "$work/twin_a/e" --eval "$work/twin_b/e"
+panel=$(basename "$(ls "$work/twin_a/e/images/"*.png | head -1)")
+unchanged "  ... e/ holds the first one's panel" "$work/rep_twins/e/images/$panel" "$(sum_of "$work/twin_a/e/images/$panel")"
+unchanged "  ... e-2/ holds the second one's" "$work/rep_twins/e-2/images/$panel" "$(sum_of "$work/twin_b/e/images/$panel")"
+mkdir -p "$work/dotdot"
+check_ok "report --eval <folder>/images/.. --out <a new folder>" \
+  "$apps/transhuman-report" page --out "$work/dotdot/page" --eval "$work/e_good/images/.."
+if [[ $(ls -A "$work/dotdot") == page && -f $work/dotdot/page/e_good/summary.json ]]; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+rows+=("| ... nothing beside --out; the copy in page/e_good/ | - | - | - | $(ls -A "$work/dotdot" | tr '\n' ' ') | $ok |")
+mkdir -p "$work/rep_link" "$work/rep_outside" && echo keep >"$work/rep_outside/summary.json"
+ln -s "$work/rep_outside" "$work/rep_link/e_good"
+check "report --out <a folder whose e_good/ is a link out of it>" 2 "'$work/rep_link/e_good' in --out is a symbolic link" \
+  "$apps/transhuman-report" page --out "$work/rep_link" --eval "$work/e_good"
+unchanged "  ... the folder the link points at" "$work/rep_outside/summary.json" "$(echo keep | md5sum | cut -d' ' -f1)"
+# A running evaluation holds its folder: the report neither writes there nor reads it half-done.
+"${evaluate[@]}" $(on "$data") --out "$work/e_running" eval.limit=0 render.samples=2048 render.progressive=false \
+  >/dev/null 2>&1 &
+evaluating=$!
+for _ in $(seq 600); do grep -q "pid $evaluating" "$work/e_running/.lock" 2>/dev/null && break; sleep 0.1; done
+check "report --out <the folder of a running evaluation>" 2 "run folder '$work/e_running' is in use by transhuman-eval (pid $evaluating on " \
+  "$apps/transhuman-report" page --out "$work/e_running" --eval "$work/e_good"
+check "report --eval <the folder of a running evaluation>" 2 "evaluation folder (--eval) '$work/e_running' is in use by transhuman-eval (pid $evaluating" \
+  "$apps/transhuman-report" page --out "$work/rep_running" --eval "$work/e_running"
+absent "  ... no page written into it" "$work/e_running/report.js"
+kill "$evaluating" 2>/dev/null; wait "$evaluating" 2>/dev/null
+
+# A render resumes only the frames of the same request, every setting that changes pixels included.
+render_into=("$apps/transhuman-render" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --orbit 3 --width 16 --height 16
+             --out)
+orbit=("${render_into[@]}" "$work/r_settings")
+"${orbit[@]}" >/dev/null 2>&1
+frames_sum=$(cat "$work/r_settings/frames/"*.png | md5sum | cut -d' ' -f1)
+check "render --precision bf16 over fp32 frames" 2 "holds frames of another request: precision (frames: fp32" "${orbit[@]}" --precision bf16
+check "render render.samples=64 over frames of 8 samples" 2 "holds frames of another request: render.samples (frames: 8, now: 64)" \
+  "${orbit[@]}" render.samples=64
+check "render render.progressive=false over progressive frames" 2 "render.progressive (frames: true, now: false)" \
+  "${orbit[@]}" render.progressive=false
+check "render --setting pose over identity frames" 2 "eval.setting (frames: identity, now: pose)" "${orbit[@]}" --setting pose
+if [[ $(cat "$work/r_settings/frames/"*.png | md5sum | cut -d' ' -f1) == "$frames_sum" ]]; then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+rows+=("| ... the frames unchanged | - | - | - | md5 $frames_sum | $ok |")
+check_out "render threads=2 (no pixel changes): resumed" "3 frames (0 rendered, 3 resumed)" "${orbit[@]}" threads=2
+check_out "render render.samples=64 --force: rendered again" "3 frames (3 rendered, 0 resumed)" "${orbit[@]}" render.samples=64 --force
+cp -r "$work/r_settings" "$work/r_unknown" && rm "$work/r_unknown/request.yaml"
+check "render into frames/ without request.yaml" 2 "holds frames/ without the request.yaml that says what made them" \
+  "${render_into[@]}" "$work/r_unknown"
+
+# A user error only rank 0 sees ends every --nproc rank at once, its own line last (the others
+# would wait train.dist_timeout_s = 300 s at the rendezvous).
+t0=$(date +%s)
+check "train --nproc 2 --out <a training run> (only rank 0 claims --out)" 2 \
+  "transhuman-train[rank 0]: error: --out '$work/run' already holds" \
+  "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --out "$work/run" --nproc 2
+secs=$(($(date +%s) - t0))
+if ((secs < 30)); then ok=ok; else ok=FAIL; failures=$((failures + 1)); fi
+rows+=("| ... ended in $secs s, not train.dist_timeout_s (300 s) | - | - | - | | $ok |")
+check "eval --nproc 2 --out <a folder holding results>" 2 "transhuman-eval[rank 0]: error: --out '$work/e_used' already holds" \
+  "${evaluate[@]}" $(on "$data") --out "$work/e_used" --nproc 2
+check "render --nproc 2 over another request's frames (after the rendezvous)" 2 \
+  "transhuman-render[rank 0]: error: '$work/r_settings' holds frames of another request: render.samples (frames: 64, now: 8)" \
+  "${orbit[@]}" --nproc 2
+check "train --nproc 2 with a data.root every rank misses" 2 "[rank " \
+  "$apps/transhuman-train" "${tiny[@]}" data.root="$work/nowhere" data.split_file="$data/split.yaml" --out "$work/t_nowhere" --nproc 2
+
 table=$(
   echo "| case | expected exit | exit | seconds | last stderr line | |"
   echo "|---|---|---|---|---|---|"
