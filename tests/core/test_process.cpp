@@ -21,7 +21,7 @@ TEST_CASE("a program's arguments are passed as they are, never read by a shell",
   CHECK_FALSE(fs::exists(dir / "pwned2"));
 }
 
-TEST_CASE("a program's exit status is returned; one that cannot start is an error naming it", "[process]") {
+TEST_CASE("a program's exit status is returned, and one that cannot start is an error naming it", "[process]") {
   CHECK(th::run_program({"sh", "-c", "exit 3"}) == 3);
   CHECK(th::run_program({"sh", "-c", "kill -TERM $$"}) == 128 + 15);
   CHECK_THROWS_WITH(th::run_program({"/nonexistent/program"}), Catch::Contains("cannot start '/nonexistent/program'"));

@@ -167,7 +167,7 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, r
 }
 
 TEST_CASE(
-    "frames are resumed only under the settings that made their pixels; another is named, or "
+    "frames are resumed only under the settings that made their pixels: another is named, or "
     "forced",
     "[inference][video]") {
   const fs::path out = th::test::scratch_dir("inference_settings");
