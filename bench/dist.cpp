@@ -6,6 +6,7 @@
 // DIR: a synthetic dataset (transhuman-synth; e.g. build/test_tmp/synth_tiny). Timings exclude
 // the first `--warmup` steps of each run (start-up, first allocations).
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -38,11 +39,10 @@ std::string fmt(double v, int prec = 2) {
   return s.str();
 }
 
-double field(const std::string& line, const std::string& key) {
-  const auto k = "\"" + key + "\": ";
-  const auto p = line.find(k);
-  if (p == std::string::npos) return NAN;
-  return std::strtod(line.c_str() + p + k.size(), nullptr);
+// A number of one metrics.jsonl row; NaN when the row lacks it (or holds null).
+double field(const nlohmann::json& row, const std::string& key) {
+  const auto it = row.find(key);
+  return it != row.end() && it->is_number() ? it->get<double>() : NAN;
 }
 
 struct RunFigures {
@@ -72,10 +72,11 @@ RunFigures train_run(const std::string& exe, const std::string& label, const std
   int n = 0;
   double ar = 0;
   while (std::getline(in, line)) {
-    if (field(line, "step") <= warmup) continue;
-    f.step_s += field(line, "time_per_step");
-    f.global_batch = int(field(line, "global_batch"));
-    ar += field(line, "allreduce_seconds");  // NaN without ranks
+    const auto row = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    if (!row.is_object() || field(row, "step") <= warmup) continue;
+    f.step_s += field(row, "time_per_step");
+    f.global_batch = int(field(row, "global_batch"));
+    ar += field(row, "allreduce_seconds");  // NaN without ranks
     ++n;
   }
   if (n == 0) th::fail(label, ": no steps after the warm-up in ", (out / "metrics.jsonl").string());

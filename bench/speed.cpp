@@ -21,6 +21,7 @@
 //                          [--out bench/results/speed.md] [--sections view orbit train eval]
 //                          [--paths blas fp32 bf16] [--repeat 2]
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <torch/torch.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -192,9 +193,10 @@ double step_seconds(const fs::path& metrics) {
   std::string line, last;
   while (std::getline(in, line))
     if (!line.empty()) last = line;
-  const auto at = last.find("\"time_per_step\": ");
-  if (at == std::string::npos) throw std::runtime_error("no time_per_step in " + metrics.string());
-  return std::stod(last.substr(at + 17));
+  const auto row = nlohmann::json::parse(last, nullptr, /*allow_exceptions=*/false);
+  if (!row.is_object() || !row.contains("time_per_step") || !row["time_per_step"].is_number())
+    throw std::runtime_error("no time_per_step in the last line of " + metrics.string());
+  return row["time_per_step"].get<double>();
 }
 
 std::vector<torch::Tensor> weights_of(const Config& c, const fs::path& checkpoint) {

@@ -10,6 +10,7 @@ packages=(
   libzstd-dev
   chromium libjs-three  # the HTML report: three.js for its 3D viewer, Chromium for its test
   libcpp-httplib-dev  # transhuman-view serves its page over HTTP
+  nlohmann-json3-dev  # every JSON file and answer is read and written with nlohmann::json
   python3 python3-numpy python3-scipy python3-torch python3-torchvision python3-skimage python3-opencv
 )
 # Optional extras (fuzzing): installed only with --with-fuzz.

@@ -2,57 +2,46 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 
 #include "core/error.hpp"
 
 namespace th::pipeline {
 namespace {
 
-std::string quote(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", c);
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
+std::string dump(const nlohmann::ordered_json& value) {
+  return value.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
 }
 
 }  // namespace
 
 JsonLine& JsonLine::add(const std::string& key, double value) {
+  if (!std::isfinite(value)) {
+    fields_[key] = nullptr;
+    return *this;
+  }
+  // Rounded to 9 significant digits: nlohmann then writes the shortest form of that.
   char buf[32];
-  if (std::isfinite(value)) std::snprintf(buf, sizeof buf, "%.9g", value);
-  else std::snprintf(buf, sizeof buf, "null");  // JSON has no NaN/inf
-  fields_.emplace_back(key, buf);
+  std::snprintf(buf, sizeof buf, "%.9g", value);
+  fields_[key] = std::strtod(buf, nullptr);
   return *this;
 }
 
 JsonLine& JsonLine::add(const std::string& key, int64_t value) {
-  fields_.emplace_back(key, std::to_string(value));
+  fields_[key] = value;
   return *this;
 }
 
 JsonLine& JsonLine::add(const std::string& key, const std::string& value) {
-  fields_.emplace_back(key, quote(value));
+  fields_[key] = value;
   return *this;
 }
 
-std::string JsonLine::str() const {
+std::string JsonLine::dump_line(const nlohmann::ordered_json& value) {
+  if (!value.is_object()) return dump(value);
   std::string out = "{";
-  for (size_t i = 0; i < fields_.size(); ++i)
-    out += (i ? ", " : "") + quote(fields_[i].first) + ": " + fields_[i].second;
+  for (const auto& field : value.items())
+    out += (out.size() > 1 ? ", " : "") + dump(field.key()) + ": " + dump(field.value());
   return out + "}";
 }
 

@@ -1,5 +1,6 @@
 #include "train/plot.hpp"
 
+#include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include <algorithm>
@@ -14,24 +15,14 @@
 namespace th::train {
 namespace {
 
-// The numeric fields of one JSON-lines record written by JsonLine (flat, no nesting).
+// The numeric fields of one metrics.jsonl record (none for a line that is not a JSON object:
+// one cut short when a run was killed).
 std::map<std::string, double> numbers(const std::string& line) {
   std::map<std::string, double> out;
-  size_t pos = 0;
-  while ((pos = line.find('"', pos)) != std::string::npos) {
-    const size_t end = line.find('"', pos + 1);
-    if (end == std::string::npos) break;
-    const std::string key = line.substr(pos + 1, end - pos - 1);
-    size_t v = line.find(':', end);
-    if (v == std::string::npos) break;
-    ++v;
-    while (v < line.size() && line[v] == ' ') ++v;
-    char* stop = nullptr;
-    const double value = std::strtod(line.c_str() + v, &stop);
-    if (stop != line.c_str() + v) out[key] = value;
-    pos = (stop && stop != line.c_str() + v) ? size_t(stop - line.c_str()) : line.find(',', v);
-    if (pos == std::string::npos) break;
-  }
+  const auto row = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+  if (!row.is_object()) return out;
+  for (const auto& field : row.items())
+    if (field.value().is_number()) out[field.key()] = field.value().get<double>();
   return out;
 }
 

@@ -1,5 +1,6 @@
 #include "train/trainer.hpp"
 
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
@@ -36,6 +37,7 @@ namespace {
 
 // A resumed run continues from its checkpoint's step: rows a killed run logged after that
 // step are dropped from metrics.jsonl (the file is rewritten whole), so no step appears twice.
+// So is a line that is not JSON: one cut short when the run was killed.
 void drop_rows_after(const fs::path& file, int64_t step) {
   std::error_code ec;
   if (!fs::exists(file, ec)) return;
@@ -44,8 +46,10 @@ void drop_rows_after(const fs::path& file, int64_t step) {
   int64_t dropped = 0;
   while (std::getline(in, line)) {
     if (line.empty()) continue;
-    const size_t at = line.find("\"step\": ");
-    if (at != std::string::npos && std::atoll(line.c_str() + at + 8) > step) {
+    const auto row = nlohmann::json::parse(line, nullptr, /*allow_exceptions=*/false);
+    const bool later = row.is_object() && row.contains("step") && row["step"].is_number() &&
+                       row["step"].get<double>() > double(step);
+    if (row.is_discarded() || later) {
       ++dropped;
       continue;
     }
