@@ -1,6 +1,7 @@
 #include "viewer/server.hpp"
 
 #include <httplib.h>
+#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
@@ -112,12 +113,18 @@ th::video::PathCamera look_camera(const torch::Tensor& eye, const torch::Tensor&
   return {K, R, T};
 }
 
-std::string json_vec(const torch::Tensor& v) {
+using Json = nlohmann::ordered_json;
+
+// An answer's body: bytes of a name that are not UTF-8 become U+FFFD, and a NaN or infinite
+// score is written as null (JSON has neither).
+std::string body(const Json& answer) {
+  return answer.dump(-1, ' ', false, Json::error_handler_t::replace);
+}
+
+// A 3-vector: [x, y, z].
+Json vec3_json(const torch::Tensor& v) {
   const auto c = v.to(torch::kFloat64).contiguous();
-  std::ostringstream out;
-  out.precision(9);
-  out << '[' << c[0].item<double>() << ',' << c[1].item<double>() << ',' << c[2].item<double>() << ']';
-  return out.str();
+  return Json::array({c[0].item<double>(), c[1].item<double>(), c[2].item<double>()});
 }
 
 // (H, W, 3) float RGB in [0, 1], or (H, W) values in [0, 1] shown as grey, as PNG bytes.
@@ -142,42 +149,46 @@ class Viewer {
       : session_(session), options_(options), stopping_(stopping) {}
 
   std::string info() const {
-    std::ostringstream out;
-    out << "{\"humans\":[";
+    Json humans = Json::array();
     for (size_t h = 0; h < session_.dataset().humans().size(); ++h) {
       const auto& person = session_.human(int(h));
-      out << (h ? "," : "") << "{\"name\":" << report::js_string(person.name()) << ",\"cameras\":" << person.num_cameras()
-          << ",\"frames\":[";
-      const auto frames = session_.setting_frames(int(h));
-      for (size_t i = 0; i < frames.size(); ++i) out << (i ? "," : "") << frames[i];
-      out << "]}";
+      humans.push_back({{"name", person.name()},
+                        {"cameras", person.num_cameras()},
+                        {"frames", session_.setting_frames(int(h))}});
     }
-    const auto& c = session_.config();
-    out << "],\"samples\":" << c.render.samples << ",\"max_size\":" << options_.max_size
-        << ",\"view\":" << options_.view << ",\"max_samples\":" << kMaxSamples
-        << ",\"render_timeout_s\":" << options_.render_timeout_s
-        << ",\"start\":{\"human\":" << options_.start_human << ",\"frame\":" << options_.start_frame << "}}";
-    return out.str();
+    Json answer;
+    answer["humans"] = std::move(humans);
+    answer["samples"] = session_.config().render.samples;
+    answer["max_size"] = options_.max_size;
+    answer["view"] = options_.view;
+    answer["max_samples"] = kMaxSamples;
+    answer["render_timeout_s"] = options_.render_timeout_s;
+    answer["start"] = {{"human", options_.start_human}, {"frame", options_.start_frame}};
+    return body(answer);
   }
 
   // Data only (no network): answers while a render runs.
   std::string frame_json(const httplib::Request& req) {
     const auto [h, f] = person_frame(req);
     const auto frame = frame_data(h, f);
-    std::ostringstream out;
-    out << "{\"center\":" << json_vec(session_.body_center(h, f)) << ",\"references\":"
-        << frame->sample.reference_views.size() << ",\"cameras\":[";
+    Json cameras = Json::array();
     for (int c = 0; c < session_.human(h).num_cameras(); ++c) {
       const auto cam = session_.dataset_camera(*frame, c);
       const auto R = cam.R, eye = -torch::mv(R.t(), cam.T.flatten());
       const double height = double(frame->sample.target_image.size(0));
       const double fy = cam.K[1][1].item<double>();
-      out << (c ? "," : "") << "{\"eye\":" << json_vec(eye) << ",\"forward\":" << json_vec(R[2])
-          << ",\"up\":" << json_vec(-R[1]) << ",\"fovy\":" << 2.0 * std::atan(0.5 * height / fy) * 180.0 / M_PI
-          << ",\"width\":" << frame->sample.target_image.size(1) << ",\"height\":" << height << "}";
+      cameras.push_back({{"eye", vec3_json(eye)},
+                         {"forward", vec3_json(R[2])},
+                         {"up", vec3_json(-R[1])},
+                         {"fovy", 2.0 * std::atan(0.5 * height / fy) * 180.0 / M_PI},
+                         {"width", frame->sample.target_image.size(1)},
+                         {"height", height}});
     }
-    out << "]}";
-    return out.str();
+    Json answer;
+    answer["center"] = vec3_json(session_.body_center(h, f));
+    answer["references"] = frame->sample.reference_views.size();
+    answer["cameras"] = std::move(cameras);
+    return body(answer);
   }
 
   std::string reference(const httplib::Request& req) {
@@ -194,11 +205,13 @@ class Viewer {
     const int c = int_param(req, "camera", 0, session_.human(h).num_cameras() - 1);
     const auto lock = render_lock([&] { return stopped_or_gone(client_gone); });
     const auto r = session_.evaluate_view(h, f, c);
-    std::ostringstream out;
-    out.precision(10);
-    out << "{\"human\":" << report::js_string(session_.human(h).name()) << ",\"frame\":" << f << ",\"view\":" << c
-        << ",\"psnr\":" << r.psnr << ",\"ssim\":" << r.ssim << "}";
-    return out.str();
+    Json answer;
+    answer["human"] = session_.human(h).name();
+    answer["frame"] = f;
+    answer["view"] = c;
+    answer["psnr"] = r.psnr;
+    answer["ssim"] = r.ssim;
+    return body(answer);
   }
 
   // The ground truth of dataset camera C (the target image inside the body's box), PNG.
