@@ -1,12 +1,10 @@
 #include "report/report.hpp"
 
 #include <spdlog/spdlog.h>
-#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <cctype>
 #include <chrono>
-#include <cstdio>
 #include <cstdlib>
 #include <ctime>
 #include <fstream>
@@ -18,6 +16,7 @@
 #include "core/files.hpp"
 #include "eval/evaluator.hpp"
 #include "io/files.hpp"
+#include "pipeline/jsonl.hpp"
 
 namespace th::report {
 namespace fs = std::filesystem;
@@ -44,57 +43,68 @@ std::string read_text(const fs::path& path, const std::string& what) {
   return ss.str();
 }
 
+// The word of `text` around byte `at` (1-based, as nlohmann's parse_error counts): what a
+// parser stopped at, e.g. "NaN".
+std::string word_at(const std::string& text, size_t at) {
+  if (at == 0 || text.empty()) return "";
+  const auto in_word = [](char c) {
+    return std::isalnum((unsigned char)c) || c == '-' || c == '+' || c == '.';
+  };
+  size_t b = std::min(at, text.size()) - 1, e = b;
+  if (!in_word(text[b])) return "";
+  while (b > 0 && in_word(text[b - 1])) --b;
+  while (e < text.size() && in_word(text[e])) ++e;
+  return text.substr(b, e - b);
+}
+
+// nlohmann's message without its "[json.exception.parse_error.101] " prefix.
+std::string parse_message(const std::exception& e) {
+  const std::string what = e.what();
+  const size_t end = what.rfind("] ", what.find("parse error"));
+  return end == std::string::npos ? what : what.substr(end + 2);
+}
+
 // An evaluation's summary.json, checked and written again as canonical JSON for the page: a
 // file the page's JSON.parse would reject (hand-edited, cut short) is refused here, by name,
 // rather than leaving a blank page. It must be a flat object holding at least the keys the page
-// reads; values are numbers, strings, booleans or null (the scores: finite numbers or null).
+// reads; values are numbers, strings, booleans or null (the scores: numbers or null; NaN and
+// Infinity, which Python's json.dump writes, are refused naming the key).
 std::string read_summary(const fs::path& eval) {
+  using Json = nlohmann::ordered_json;
   const fs::path path = eval / "summary.json";
   const std::string text = read_text(path, "evaluation summary");
-  YAML::Node root;
+  const std::string where = "report: evaluation summary '" + path.string() + "'";
+  if (text.find_first_not_of(" \t\r\n") == std::string::npos)
+    fail(where, " is not a JSON object (the file is empty)");
+  std::string key;  // the top-level key whose value is being read
+  const Json::parser_callback_t note_key = [&key](int depth, Json::parse_event_t event,
+                                                  Json& parsed) {
+    if (depth == 1 && event == Json::parse_event_t::key) key = parsed.get<std::string>();
+    return true;
+  };
+  Json root;
   try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    fail("report: evaluation summary '", path.string(), "' is not JSON (", e.msg, ", line ", e.mark.line + 1, ")");
+    root = Json::parse(text, note_key);
+  } catch (const Json::parse_error& e) {
+    const std::string word = word_at(text, e.byte);
+    if (!key.empty() && (word == "NaN" || word == "Infinity" || word == "-Infinity"))
+      fail(where, ": '", key, "' = '", word, "' is not a finite number (or null)");
+    fail(where, " is not JSON (", parse_message(e), ")");
   }
-  if (!root.IsMap()) fail("report: evaluation summary '", path.string(), "' is not a JSON object");
-  for (const char* key : {"setting", "images", "psnr", "ssim", "lpips"})
-    if (!root[key]) fail("report: evaluation summary '", path.string(), "' has no '", key, "'");
-  std::string json = "{";
-  for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    const YAML::Node& v = kv.second;
-    json += (json.size() > 1 ? ", " : "") + js_string(key) + ": ";
-    if (v.IsNull()) {
-      json += "null";
-      continue;
-    }
-    if (!v.IsScalar()) fail("report: evaluation summary '", path.string(), "': '", key, "' is not a single value");
-    const std::string value = v.Scalar();
-    if (v.Tag() == "!") {  // quoted: a string
-      if (key == "images" || key == "psnr" || key == "ssim" || key == "lpips")
-        fail("report: evaluation summary '", path.string(), "': '", key, "' = \"", value, "\" is not a number");
-      json += js_string(value);
-      continue;
-    }
-    char* end = nullptr;
-    const double number = std::strtod(value.c_str(), &end);
-    if (!value.empty() && end == value.c_str() + value.size() && std::isfinite(number)) {
-      char buf[40];
-      std::snprintf(buf, sizeof buf, "%.17g", number);
-      json += buf;
-    } else if (key == "images" || key == "psnr" || key == "ssim" || key == "lpips") {
-      fail("report: evaluation summary '", path.string(), "': '", key, "' = '", value,
-           "' is not a finite number (or null)");
-    } else if (value == "true" || value == "false") {
-      json += value;
-    } else {
-      json += js_string(value);
-    }
+  if (!root.is_object()) fail(where, " is not a JSON object");
+  const std::set<std::string> scores{"images", "psnr", "ssim", "lpips"};
+  for (const char* required : {"setting", "images", "psnr", "ssim", "lpips"})
+    if (!root.contains(required)) fail(where, " has no '", required, "'");
+  for (const auto& field : root.items()) {
+    const Json& v = field.value();
+    if (v.is_structured()) fail(where, ": '", field.key(), "' is not a single value");
+    if (!scores.count(field.key()) || v.is_null() || v.is_number()) continue;
+    if (v.is_string())
+      fail(where, ": '", field.key(), "' = \"", v.get<std::string>(), "\" is not a number");
+    fail(where, ": '", field.key(), "' = '", v.dump(), "' is not a finite number (or null)");
   }
-  if (root["setting"].IsNull() || !root["setting"].IsScalar())
-    fail("report: evaluation summary '", path.string(), "': 'setting' must be a string");
-  return json + "}";
+  if (!root["setting"].is_string()) fail(where, ": 'setting' must be a string");
+  return pipeline::JsonLine::dump_line(root);
 }
 
 // Whole or not at all (a full disk leaves the previous file, and the error names this one).
@@ -274,30 +284,31 @@ std::vector<CsvRow> csv_rows(const std::string& csv, const fs::path& file) {
   return rows;
 }
 
-// One evaluation folder as a JavaScript object literal; its panels and files brought into `out`.
-std::string eval_js(const fs::path& eval, const fs::path& out, const std::string& copy_name) {
-  const std::string summary = read_summary(eval);
+// One evaluation folder as the page's data; its panels and files brought into `out`.
+nlohmann::ordered_json eval_json(const fs::path& eval, const fs::path& out,
+                                 const std::string& copy_name) {
+  nlohmann::ordered_json e;
+  e["name"] = copy_name;
+  e["summary"] = read_summary(eval);  // as text: report.js parses it
   const std::string csv = read_text(eval / "per_image.csv", "per-image scores");
-  std::string panels = "[";
+  e["per_image"] = csv;
+  auto& panels = e["panels"] = nlohmann::ordered_json::array();
   for (const CsvRow& r : csv_rows(csv, eval / "per_image.csv")) {
     const fs::path panel = eval / "images" / th::eval::panel_file_name(r.human, r.frame, r.view);
-    panels += panels.size() > 1 ? "," : "";
-    panels += fs::exists(panel) ? js_string(href(bring_in(panel, out, fs::path(copy_name) / "images" /
-                                                          panel.filename()), out))
-                                : "null";
+    if (fs::exists(panel))
+      panels.push_back(
+          href(bring_in(panel, out, fs::path(copy_name) / "images" / panel.filename()), out));
+    else
+      panels.push_back(nullptr);
   }
-  panels += "]";
-  std::string files = "{";
+  auto& files = e["files"] = nlohmann::ordered_json::object();
   for (const char* name : {"summary.json", "per_image.csv", "results.md", "config.yaml", "index.html"}) {
     // The evaluation's own page is linked, not copied: its links are relative to its folder.
     if (!fs::exists(eval / name) || (std::string(name) == "index.html" && !path_within(eval, out))) continue;
     if (std::string(name) == "index.html" && fs::equivalent(eval, out)) continue;
-    files += std::string(files.size() > 1 ? "," : "") + js_string(name) + ":" +
-             js_string(href(bring_in(eval / name, out, fs::path(copy_name) / name), out));
+    files[name] = href(bring_in(eval / name, out, fs::path(copy_name) / name), out);
   }
-  files += "}";
-  return "{name:" + js_string(copy_name) + ",summary:" + js_string(summary) + ",per_image:" + js_string(csv) +
-         ",panels:" + panels + ",files:" + files + "}";
+  return e;
 }
 
 // Writes report.js and report.css (our own page script and style) into `out`.
@@ -347,8 +358,8 @@ void check_page_folder(const fs::path& out, const std::vector<fs::path>& evals) 
 
 // The page around the data: errors are caught from the first script on, so a test (or a user)
 // sees every failure in the page itself (#th-errors) as well as in the console.
-std::string page_html(const std::string& title, const std::string& data_js, const std::string& scripts,
-                      bool evaluation_folder = false) {
+std::string page_html(const std::string& title, const nlohmann::ordered_json& data,
+                      const std::string& scripts, bool evaluation_folder = false) {
   return "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
          "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n" + kGenerator + "\n" +
          (evaluation_folder ? kEvaluationPage + "\n" : std::string()) + "<title>" +
@@ -364,42 +375,35 @@ std::string page_html(const std::string& title, const std::string& data_js, cons
          html_escape(title) +
          "</h1><p class=\"meta\" id=\"meta\"></p></header>\n<main id=\"report\"></main>\n"
          "<footer><pre id=\"th-errors\"></pre></footer>\n<script>\nwindow.TH_REPORT = " +
-         data_js + ";\n</script>\n" + scripts + "<script src=\"report.js\"></script>\n</body>\n</html>\n";
+         script_json(data) + ";\n</script>\n" + scripts +
+         "<script src=\"report.js\"></script>\n</body>\n</html>\n";
 }
 
-std::string common_js(const std::string& kind, const std::string& config) {
-  return "kind:" + js_string(kind) + ",generated:" + js_string(utc_now()) + ",commit:" + js_string(build_commit()) +
-         ",config:" + js_string(config);
+// What every page's data starts with.
+nlohmann::ordered_json page_data(const std::string& kind, const std::string& config) {
+  nlohmann::ordered_json data;
+  data["kind"] = kind;
+  data["generated"] = utc_now();
+  data["commit"] = build_commit();
+  data["config"] = config;
+  return data;
 }
 
 }  // namespace
 
-std::string js_string(const std::string& text) {
-  std::string out = "\"";
-  for (unsigned char c : text) {
-    char buf[8];
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      case '<':  // no "</script>" or "<!--" can end the element early
-      case '>':
-      case '&':
-        std::snprintf(buf, sizeof buf, "\\u%04x", c);
-        out += buf;
-        break;
-      default:
-        if (c < 0x20) {
-          std::snprintf(buf, sizeof buf, "\\u%04x", c);
-          out += buf;
-        } else {
-          out += char(c);
-        }
-    }
+std::string script_json(const nlohmann::ordered_json& value) {
+  const std::string json =
+      value.dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
+  std::string out;
+  out.reserve(json.size());
+  for (const char c : json) {
+    // Outside strings JSON has none of these, so escaping them keeps the text the same JSON.
+    if (c == '<') out += "\\u003c";
+    else if (c == '>') out += "\\u003e";
+    else if (c == '&') out += "\\u0026";
+    else out += c;
   }
-  return out + "\"";
+  return out;
 }
 
 std::string build_commit() { return detail::build_commit(); }
@@ -430,36 +434,34 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   }
   check_page_folder(out, sources.evals);
   fs::create_directories(out);
-  std::string evals = "[";
+  auto evals = nlohmann::ordered_json::array();
   bool evaluation_folder = false;  // the page of the evaluation in `out` itself
   std::set<std::string> taken = kPageFiles;  // and the mesh's copy
   const std::string mesh_name = sources.mesh.empty() ? "" : copy_name(sources.mesh, taken);
-  for (size_t i = 0; i < sources.evals.size(); ++i) {
-    const fs::path& dir = sources.evals[i];
+  for (const fs::path& dir : sources.evals) {
     if (!fs::is_directory(dir)) fail("report: no evaluation folder '", dir.string(), "'");
     const bool here = fs::equivalent(dir, out);
     evaluation_folder = evaluation_folder || here;
-    const std::string name = here ? "." : copy_name(dir, taken);
-    evals += (i ? "," : "") + eval_js(dir, out, name);
+    evals.push_back(eval_json(dir, out, here ? "." : copy_name(dir, taken)));
   }
-  evals += "]";
   const fs::path config = sources.evals.front() / "config.yaml";
-  std::string data = "{" + common_js("eval", fs::exists(config) ? read_text(config, "config") : "") + ",evals:" + evals;
-  if (!sources.metrics.empty())
-    data += ",metrics:" + js_string(read_text(sources.metrics, "training metrics"));
+  nlohmann::ordered_json data =
+      page_data("eval", fs::exists(config) ? read_text(config, "config") : "");
+  data["evals"] = std::move(evals);
+  if (!sources.metrics.empty()) data["metrics"] = read_text(sources.metrics, "training metrics");
 
   if (!sources.orbit.empty() && fs::exists(sources.orbit / "frames")) {
     std::vector<fs::path> frames;
     for (const auto& e : fs::directory_iterator(sources.orbit / "frames"))
       if (e.path().extension() == ".png") frames.push_back(e.path());
     std::sort(frames.begin(), frames.end());
-    std::string list = "[";
+    auto& orbit = data["orbit"];
+    orbit["frames"] = nlohmann::ordered_json::array();
     for (const auto& f : frames)
-      list += (list.size() > 1 ? "," : "") + js_string(href(bring_in(f, out, fs::path("orbit") / "frames" / f.filename()), out));
-    data += ",orbit:{frames:" + list + "]";
+      orbit["frames"].push_back(
+          href(bring_in(f, out, fs::path("orbit") / "frames" / f.filename()), out));
     if (fs::exists(sources.orbit / "video.mp4"))
-      data += ",video:" + js_string(href(bring_in(sources.orbit / "video.mp4", out, "orbit/video.mp4"), out));
-    data += "}";
+      orbit["video"] = href(bring_in(sources.orbit / "video.mp4", out, "orbit/video.mp4"), out);
   }
 
   std::string scripts;
@@ -472,14 +474,12 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
                    "window.TH_MESH_PLY = \"" +
                    base64(ply) + "\";\n");
     const std::string three = bring_three_js(out);
-    data += ",mesh:{file:" + js_string(href(copy, out)) + ",viewer:" + (three.empty() ? "false" : "true") + "}";
+    data["mesh"] = {{"file", href(copy, out)}, {"viewer", !three.empty()}};
     scripts = three + "<script src=\"mesh.js\"></script>\n";
   }
-  std::string links = "[";
-  for (const auto& [label, target] : sources.links) {
-    links += (links.size() > 1 ? "," : "") + std::string("[") + js_string(label) + "," + js_string(target) + "]";
-  }
-  data += ",links:" + links + "]}";
+  auto& links = data["links"] = nlohmann::ordered_json::array();
+  for (const auto& [label, target] : sources.links)
+    links.push_back(nlohmann::ordered_json::array({label, target}));
 
   write_assets(out);
   const fs::path page = out / "index.html";
@@ -492,20 +492,23 @@ fs::path write_ablation_page(const std::vector<AblationRow>& rows, const std::st
   if (rows.empty()) fail("report: no ablation rows to show");
   check_page_folder(out, {});
   fs::create_directories(out);
-  std::string list = "[";
+  nlohmann::ordered_json data = page_data("ablation", "");
+  auto& list = data["rows"] = nlohmann::ordered_json::array();
   for (const AblationRow& row : rows) {
-    const std::string summary = read_summary(row.eval);
-    const std::string csv = read_text(row.eval / "per_image.csv", "per-image scores");
-    char seconds[32];
-    std::snprintf(seconds, sizeof seconds, "%.0f", row.train_seconds);
-    list += (list.size() > 1 ? "," : "") + std::string("{name:") + js_string(row.name) +
-            ",description:" + js_string(row.description) + ",summary:" + js_string(summary) +
-            ",per_image:" + js_string(csv) + ",train_seconds:" + (std::isfinite(row.train_seconds) ? seconds : "null") +
-            ",page:" + (fs::exists(row.eval / "index.html") ? js_string(href(row.eval / "index.html", out)) : "null") +
-            "}";
+    nlohmann::ordered_json r;
+    r["name"] = row.name;
+    r["description"] = row.description;
+    r["summary"] = read_summary(row.eval);  // as text: report.js parses it
+    r["per_image"] = read_text(row.eval / "per_image.csv", "per-image scores");
+    r["train_seconds"] = std::isfinite(row.train_seconds)
+                             ? nlohmann::ordered_json(std::llround(row.train_seconds))
+                             : nullptr;
+    r["page"] = fs::exists(row.eval / "index.html")
+                    ? nlohmann::ordered_json(href(row.eval / "index.html", out))
+                    : nullptr;
+    list.push_back(std::move(r));
   }
-  list += "]";
-  const std::string data = "{" + common_js("ablation", "") + ",rows:" + list + ",links:[]}";
+  data["links"] = nlohmann::ordered_json::array();
   write_assets(out);
   const fs::path page = out / "index.html";
   write_text(destination(out, "index.html"), page_html(title, data, ""));

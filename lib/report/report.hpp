@@ -7,6 +7,8 @@
 // viewer uses three.js's classic scripts from Debian's libjs-three, copied into the folder; the
 // mesh travels as base64 in mesh.js because a file:// page may not fetch other files.
 
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <filesystem>
 #include <string>
@@ -58,7 +60,9 @@ std::filesystem::path find_three_js();
 // The commit the binary was built from ("unknown" outside a git checkout).
 std::string build_commit();
 
-// `text` as a JavaScript string literal that is safe inside an HTML <script> element.
-std::string js_string(const std::string& text);
+// `value` as JSON that is safe inside an HTML <script> element: '<', '>' and '&' in strings are
+// written as \u003c, \u003e and \u0026, so no "</script>" or "<!--" ends the element early. Bytes
+// that are not UTF-8 become U+FFFD.
+std::string script_json(const nlohmann::ordered_json& value);
 
 }  // namespace th::report

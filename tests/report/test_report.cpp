@@ -1,5 +1,7 @@
 // The page writer without a browser: escaping, what index.html embeds, what the folder holds.
 #include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -17,6 +19,16 @@ std::string read_all(const fs::path& p) {
   std::stringstream ss;
   ss << in.rdbuf();
   return ss.str();
+}
+
+// The data index.html embeds (window.TH_REPORT = {...};), parsed as JSON.
+nlohmann::json page_data(const std::string& html) {
+  const std::string start = "window.TH_REPORT = ";
+  const size_t b = html.find(start);
+  REQUIRE(b != std::string::npos);
+  const size_t e = html.find(";\n</script>", b);
+  REQUIRE(e != std::string::npos);
+  return nlohmann::json::parse(html.substr(b + start.size(), e - b - start.size()));
 }
 
 void write(const fs::path& p, const std::string& text) {
@@ -40,11 +52,17 @@ fs::path fake_eval(const fs::path& dir) {
 
 }  // namespace
 
-TEST_CASE("js_string escapes quotes, newlines and anything that could close the script element", "[report]") {
-  CHECK(th::report::js_string("a\"b\\c\nd") == "\"a\\\"b\\\\c\\nd\"");
-  CHECK(th::report::js_string("</script><!--") == "\"\\u003c/script\\u003e\\u003c!--\"");
-  CHECK(th::report::js_string(std::string("\x01", 1)) == "\"\\u0001\"");
-  CHECK(th::report::js_string("λ") == "\"λ\"");  // UTF-8 passes through
+TEST_CASE("script_json escapes quotes, newlines and anything that could close the script element",
+          "[report]") {
+  using th::report::script_json;
+  CHECK(script_json("a\"b\\c\nd") == "\"a\\\"b\\\\c\\nd\"");
+  CHECK(script_json("</script><!--") == "\"\\u003c/script\\u003e\\u003c!--\"");
+  CHECK(script_json(std::string("\x01", 1)) == "\"\\u0001\"");
+  CHECK(script_json("λ") == "\"λ\"");  // UTF-8 passes through
+  CHECK(script_json(std::string("a\xff", 2)) == "\"a\xef\xbf\xbd\"");  // not UTF-8: U+FFFD
+  // Still JSON, and the same value.
+  const nlohmann::ordered_json value = {{"k&y", {"</script>", nullptr, 1.5, true}}};
+  CHECK(nlohmann::ordered_json::parse(script_json(value)) == value);
 }
 
 TEST_CASE("an evaluation page embeds the outputs and refers to the panels where they lie", "[report]") {
@@ -55,6 +73,11 @@ TEST_CASE("an evaluation page embeds the outputs and refers to the panels where 
   CHECK(page == eval / "index.html");
   const std::string html = read_all(page);
   CHECK_THAT(html, Catch::Contains("\\\"psnr\\\": 21.5"));  // summary.json, as text
+  const auto summary =
+      nlohmann::json::parse(page_data(html)["evals"][0]["summary"].get<std::string>());
+  CHECK(summary["setting"] == "identity");
+  CHECK(summary["psnr"] == 21.5);
+  CHECK(summary["lpips"].is_null());
   CHECK_THAT(html, Catch::Contains("\"./images/CoreView_s03_f0002_v05.png\""));
   CHECK(html.find("</script><b>") == std::string::npos);  // the config cannot break out
   CHECK(fs::exists(eval / "report.js"));
@@ -131,6 +154,35 @@ TEST_CASE("a missing summary.json is an error naming the file", "[report]") {
   CHECK_THROWS_WITH(th::report::write_page(sources, dir), Catch::Contains((dir / "summary.json").string()));
 }
 
+TEST_CASE("a summary.json that is not the evaluator's JSON is an error naming the file and key",
+          "[report]") {
+  const fs::path eval = fake_eval(th::test::scratch_dir("report_bad_summary") / "e");
+  th::report::PageSources sources;
+  sources.evals = {eval};
+  const std::string file = "'" + (eval / "summary.json").string() + "'";
+  const std::pair<std::string, std::string> cases[] = {
+      {"{\"setting\": \"identity\", \"psnr\": 20.", file + " is not JSON ("},
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": NaN, \"ssim\": 0.5, \"lpips\": null}",
+       file + ": 'psnr' = 'NaN' is not a finite number (or null)"},
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": 20, \"ssim\": -Infinity, \"lpips\": null}",
+       file + ": 'ssim' = '-Infinity' is not a finite number (or null)"},
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": \"20\", \"ssim\": 0.5, \"lpips\": null}",
+       file + ": 'psnr' = \"20\" is not a number"},
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": 20, \"ssim\": 0.5}",
+       file + " has no 'lpips'"},
+      {"{\"setting\": [1], \"images\": 1, \"psnr\": 20, \"ssim\": 0.5, \"lpips\": null}",
+       file + ": 'setting' is not a single value"},
+      {"[1, 2]", file + " is not a JSON object"},
+      {"\n", file + " is not a JSON object"},
+  };
+  for (const auto& [text, message] : cases) {
+    CAPTURE(text);
+    write(eval / "summary.json", text);
+    CHECK_THROWS_WITH(th::report::write_page(sources, eval),
+                      Catch::Contains("report: evaluation summary " + message));
+  }
+}
+
 TEST_CASE("an ablation page holds every row and links each row's own page", "[report]") {
   const fs::path root = th::test::scratch_dir("report_ablation");
   fake_eval(root / "full" / "eval_identity");
@@ -140,11 +192,14 @@ TEST_CASE("an ablation page holds every row and links each row's own page", "[re
       {{"full", "the paper's model", root / "full" / "eval_identity", 600},
        {"fdi_wo_h", "without the human branch", root / "fdi_wo_h" / "eval_identity", NAN}},
       "ablations", root);
-  const std::string html = read_all(page);
-  CHECK_THAT(html, Catch::Contains("name:\"full\""));
-  CHECK_THAT(html, Catch::Contains("name:\"fdi_wo_h\""));
-  CHECK_THAT(html, Catch::Contains("page:\"./full/eval_identity/index.html\""));
-  CHECK_THAT(html, Catch::Contains("train_seconds:null"));
+  const auto rows = page_data(read_all(page))["rows"];
+  REQUIRE(rows.size() == 2);
+  CHECK(rows[0]["name"] == "full");
+  CHECK(rows[0]["page"] == "./full/eval_identity/index.html");
+  CHECK(rows[0]["train_seconds"] == 600);
+  CHECK(rows[1]["name"] == "fdi_wo_h");
+  CHECK(rows[1]["page"].is_null());
+  CHECK(rows[1]["train_seconds"].is_null());
 }
 
 namespace {
@@ -191,7 +246,10 @@ TEST_CASE(
   const std::string html = read_all(th::report::write_page(sources, root / "two"));
   CHECK(read_all(root / "two" / "e" / "images" / "CoreView_s03_f0000_v03.png") == "a's panel");
   CHECK(read_all(root / "two" / "e-2" / "images" / "CoreView_s03_f0000_v03.png") == "b's panel");
-  CHECK_THAT(html, Catch::Contains("name:\"e\"") && Catch::Contains("name:\"e-2\""));
+  const auto evals = page_data(html)["evals"];
+  REQUIRE(evals.size() == 2);
+  CHECK(evals[0]["name"] == "e");
+  CHECK(evals[1]["name"] == "e-2");
   CHECK_THAT(html, Catch::Contains("\"./e-2/images/CoreView_s03_f0000_v03.png\""));
 
   // A folder named like one of the page's own files takes another name.
