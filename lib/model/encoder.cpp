@@ -48,19 +48,28 @@ namespace {
 // Per-channel sums over (N, H, W) of a (N, C, H, W) tensor, in float64.
 torch::Tensor channel_sums(const torch::Tensor& t) { return t.sum({0, 2, 3}, false, torch::kFloat64); }
 
+// The ranks' reducer as autograd's saved data holds it (a capsule): the graph keeps it alive
+// until backward runs, even if the module's is replaced in between.
+struct ReducerHolder : torch::CustomClassHolder {
+  explicit ReducerHolder(std::shared_ptr<const StatsReducer> r) : reduce(std::move(r)) {}
+  std::shared_ptr<const StatsReducer> reduce;
+};
+
 // Batch normalisation over the images of every rank (see BatchNormImpl). Statistics and their
 // sums are float64, the output has x's type.
 struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x,
                                const torch::Tensor& weight, const torch::Tensor& bias,
                                torch::Tensor running_mean, torch::Tensor running_var,
-                               const StatsReducer* reduce, double momentum, double eps) {
+                               c10::intrusive_ptr<ReducerHolder> holder, double momentum,
+                               double eps) {
+    const StatsReducer& reduce = *holder->reduce;
     TORCH_CHECK(x.dim() == 4, "synchronised BatchNorm expects (N, C, H, W), got ", x.sizes());
     const int64_t C = x.size(1);
     const auto xd = x.to(torch::kFloat64);
     auto stats = torch::cat({channel_sums(xd), channel_sums(xd * xd),
                              torch::full({1}, double(x.numel() / C), torch::kFloat64)});
-    (*reduce)(stats);
+    reduce(stats);
     const double count = stats[2 * C].item<double>();
     TORCH_CHECK(count > 1, "synchronised BatchNorm over ", count, " values per channel");
     const auto mean = stats.slice(0, 0, C) / count;
@@ -75,7 +84,7 @@ struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
     const auto xhat = (xd - m4) * s4;
     ctx->save_for_backward({x, weight, mean, invstd});
     ctx->saved_data["count"] = count;
-    ctx->saved_data["reduce"] = int64_t(reinterpret_cast<intptr_t>(reduce));
+    ctx->saved_data["reduce"] = c10::IValue::make_capsule(holder);
     return (xhat * weight.to(torch::kFloat64).view({1, C, 1, 1}) + bias.to(torch::kFloat64).view({1, C, 1, 1}))
         .to(x.scalar_type());
   }
@@ -84,7 +93,9 @@ struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
                                                  torch::autograd::variable_list grad) {
     const auto saved = ctx->get_saved_variables();
     const auto &x = saved[0], &weight = saved[1], &mean = saved[2], &invstd = saved[3];
-    const auto* reduce = reinterpret_cast<const StatsReducer*>(intptr_t(ctx->saved_data["reduce"].toInt()));
+    const auto holder =
+        c10::static_intrusive_pointer_cast<ReducerHolder>(ctx->saved_data["reduce"].toCapsule());
+    const StatsReducer& reduce = *holder->reduce;
     const double count = ctx->saved_data["count"].toDouble();
     const int64_t C = x.size(1);
     const auto dy = grad[0].to(torch::kFloat64);
@@ -92,7 +103,7 @@ struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
     const auto xhat = (x.to(torch::kFloat64) - mean.view({1, C, 1, 1})) * s4;
     const auto sum_dy = channel_sums(dy), sum_dy_xhat = channel_sums(dy * xhat);
     auto both = torch::cat({sum_dy, sum_dy_xhat});
-    (*reduce)(both);
+    reduce(both);
     const auto mean_dy = (both.slice(0, 0, C) / count).view({1, C, 1, 1});
     const auto mean_dy_xhat = (both.slice(0, C, 2 * C) / count).view({1, C, 1, 1});
     const auto dx = (weight.to(torch::kFloat64).view({1, C, 1, 1}) * s4) * (dy - mean_dy - xhat * mean_dy_xhat);
@@ -120,7 +131,9 @@ torch::Tensor BatchNormImpl::forward(const torch::Tensor& x) {
       torch::NoGradGuard no_grad;
       num_batches_tracked += 1;
     }
-    if (sync) return SyncBatchNorm::apply(x, weight, bias, running_mean, running_var, sync.get(), momentum, eps);
+    if (sync)
+      return SyncBatchNorm::apply(x, weight, bias, running_mean, running_var,
+                                  c10::make_intrusive<ReducerHolder>(sync), momentum, eps);
     return torch::batch_norm(x, weight, bias, running_mean, running_var, true, momentum, eps, false);
   }
   if (batch_stats_at_inference)  // [parity] statistics of the reference views, not updated
