@@ -242,10 +242,25 @@ void add_model_options(CLI::App& cli, ModelOptions& m) {
   cli.add_option("--checkpoint", m.checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
   cli.add_option("--setting", m.setting,
                  "split setting (pose, identity, one_shot, cross_dataset, fitting); default eval.setting");
+  cli.add_option("--reference-views", m.reference_views,
+                 "reference cameras, comma-separated names or calibration indices (data.reference_views); "
+                 "default: the split's, or without a split the most evenly spread");
 }
 
 void apply_model_options(const ModelOptions& m, CommonOptions& options) {
   if (!m.setting.empty()) options.overrides.push_back("eval.setting=" + m.setting);
+  if (!m.reference_views.empty()) {
+    // A YAML list of double-quoted strings: every camera name is read as written.
+    std::string list;
+    std::stringstream in(m.reference_views);
+    for (std::string item; std::getline(in, item, ',');) {
+      if (item.empty()) fail("--reference-views '", m.reference_views, "': an empty camera name (see --help)");
+      std::string quoted = "\"";
+      for (const char c : item) quoted += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
+      list += (list.empty() ? "" : ", ") + quoted + "\"";
+    }
+    options.overrides.push_back("data.reference_views=[" + list + "]");
+  }
   options.inputs.push_back({"the checkpoint (--checkpoint)", m.checkpoint});
   if (!options.dry_run && m.checkpoint.empty()) fail("--checkpoint is required");
 }

@@ -91,11 +91,12 @@ int lock_run_dir(const std::filesystem::path& dir, const std::string& app_name);
 struct ModelOptions {
   std::string checkpoint;  // ours (.pt) or the reference's (.pth)
   std::string setting;     // overrides eval.setting when set
+  std::string reference_views;  // "a,b,c": overrides data.reference_views when set
 };
 
-// Registers --checkpoint and --setting on `cli`.
+// Registers --checkpoint, --setting and --reference-views on `cli`.
 void add_model_options(CLI::App& cli, ModelOptions& model);
-// After parsing: turns --setting into an override and fails unless a checkpoint is named (a
+// After parsing: turns --setting and --reference-views into overrides and fails unless a checkpoint is named (a
 // dry run needs none).
 void apply_model_options(const ModelOptions& model, CommonOptions& options);
 

@@ -21,7 +21,8 @@ void load_first_training_sample(const Config& c) {
 void print_summary(const RunContext& ctx, bool dry_run, const std::string& checkpoint) {
   const Config& c = ctx.config;
   spdlog::info("data: {} at '{}' | split file {} | train '{}' / test '{}' | ratio {}", config::name_of(c.data.dataset),
-               c.data.root, c.data.split_file, c.data.train_setting, c.data.test_setting,
+               c.data.root, c.data.split_file.empty() ? std::string("none (every person and frame)") : c.data.split_file,
+               c.data.train_setting, c.data.test_setting,
                c.data.ratio);
   // The data index: splits and annots only (no images are read), unless this is a dry run.
   try {

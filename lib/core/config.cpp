@@ -31,6 +31,11 @@ void validate_section(const DataConfig& c, const std::string& path) {
           c.patch.body_prob, "must be a probability");
   require(c.workers >= 0 && c.workers <= 256, path, "workers", c.workers, "must be in [0, 256]");
   require(c.prefetch >= 1 && c.prefetch <= 1024, path, "prefetch", c.prefetch, "must be in [1, 1024]");
+  require(c.person_id >= -1, path, "person_id", c.person_id, "must be a person's id (>= 0) or -1 (the only one)");
+  require(c.num_reference_views >= 1 && c.num_reference_views <= 64, path, "num_reference_views",
+          c.num_reference_views, "must be in [1, 64]");
+  for (const auto& v : c.reference_views)
+    require(!v.empty(), path, "reference_views", "''", "holds an empty camera name");
   require(c.visibility != VisibilitySource::files || !c.visibility_root.empty(), path, "visibility_root",
           "''", "must name a folder when data.visibility is 'files'");
   require_range(c.jitter.brightness, path, "jitter.brightness");

@@ -11,7 +11,8 @@
 namespace th {
 
 // ---- choices, parsed once into enums (their YAML names listed once, config_io.hpp) ---------
-enum class DatasetKind { zju_mocap, h36m, synthetic };
+enum class DatasetKind { zju_mocap, h36m, synthetic, capture };
+enum class DataLayout { automatic, zju_mocap, easymocap };
 enum class VisibilitySource { rasterize, files };
 enum class MissingVisibility { error, all_visible };
 enum class CalibrationCheck { error, warn };
@@ -32,7 +33,9 @@ enum class MismatchPolicy { error, warn };
     return names;                                                 \
   }
 TH_CHOICE_NAMES(DatasetKind, {"zju_mocap", DatasetKind::zju_mocap}, {"h36m", DatasetKind::h36m},
-                {"synthetic", DatasetKind::synthetic})
+                {"synthetic", DatasetKind::synthetic}, {"capture", DatasetKind::capture})
+TH_CHOICE_NAMES(DataLayout, {"auto", DataLayout::automatic}, {"zju_mocap", DataLayout::zju_mocap},
+                {"easymocap", DataLayout::easymocap})
 TH_CHOICE_NAMES(VisibilitySource, {"rasterize", VisibilitySource::rasterize}, {"files", VisibilitySource::files})
 TH_CHOICE_NAMES(MissingVisibility, {"error", MissingVisibility::error}, {"all_visible", MissingVisibility::all_visible})
 TH_CHOICE_NAMES(CalibrationCheck, {"error", CalibrationCheck::error}, {"warn", CalibrationCheck::warn})
@@ -67,9 +70,16 @@ struct JitterConfig {
 };
 
 struct DataConfig {
-  DatasetKind dataset = DatasetKind::synthetic;  // zju_mocap | h36m | synthetic
+  DatasetKind dataset = DatasetKind::synthetic;  // zju_mocap | h36m | synthetic | capture
   std::string root = "data/synthetic";           // folder holding one folder per human
+  DataLayout layout = DataLayout::automatic;     // auto | zju_mocap | easymocap (data/sequence.hpp)
+  int person_id = -1;                            // easymocap: the person's id in the SMPL files; -1: the only one
+  // Empty: every person under data.root, every frame; references as below, the other cameras targets.
   std::string split_file = "data_splits/synthetic.yaml";
+  // Fixed reference cameras by name or index, replacing the setting's; empty: the split's, or
+  // without a split the num_reference_views cameras most evenly spread around the body.
+  std::vector<std::string> reference_views;
+  int num_reference_views = 3;                   // without a split file
   std::string train_setting = "training";
   std::string test_setting = "identity";         // pose | identity | one_shot | cross_dataset | fitting
   std::string smpl_model = "";                   // SMPL .pkl/.npz; empty: <root>/smpl_model.npz
@@ -258,7 +268,11 @@ template <class V> void visit_fields(V& v, JitterConfig& c) {
 template <class V> void visit_fields(V& v, DataConfig& c) {
   v.choice("dataset", c.dataset);
   v("root", c.root);
+  v.choice("layout", c.layout);
+  v("person_id", c.person_id);
   v("split_file", c.split_file);
+  v("reference_views", c.reference_views);
+  v("num_reference_views", c.num_reference_views);
   v("train_setting", c.train_setting);
   v("test_setting", c.test_setting);
   v("smpl_model", c.smpl_model);

@@ -15,6 +15,7 @@
 #include "data/calibration.hpp"
 #include "data/h36m.hpp"
 #include "data/rays.hpp"
+#include "data/zju_mocap.hpp"
 #include "geometry/camera.hpp"
 
 namespace th::data {
@@ -64,48 +65,93 @@ std::shared_ptr<const body::SmplModel> load_body_model(const DataConfig& config)
   return std::make_shared<const body::SmplModel>(body::load_smpl(path));
 }
 
+namespace {
+
+SplitSetting setting_of(const DataConfig& config, const std::string& setting, Dataset::Mode mode) {
+  if (config.split_file.empty())
+    return whole_capture_setting(config.root, setting, mode == Dataset::Mode::Train, config.num_reference_views);
+  return load_split(config.split_file, setting);
+}
+
+std::string camera_list(const HumanSequence& human, const std::vector<int>& cameras) {
+  std::string out;
+  for (int c : cameras) out += (out.empty() ? "" : ", ") + human.camera_name(c);
+  return out;
+}
+
+}  // namespace
+
 Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode,
                  std::shared_ptr<const body::SmplModel> smpl)
-    : config_(config), setting_(load_split(config.split_file, setting)), mode_(mode),
-      smpl_(std::move(smpl)) {
+    : config_(config), setting_(setting_of(config, setting, mode)), mode_(mode), smpl_(std::move(smpl)) {
   TORCH_CHECK(smpl_, "Dataset needs a body model");
   if (!fs::is_directory(config.root))
     fail("data.root '", config.root, "' does not exist", config.dataset == DatasetKind::synthetic
          ? " (make it with: transhuman-synth --out " + config.root + ")" : "");
+  const std::string split = config.split_file.empty() ? "data.root '" + config.root + "' (no split file)"
+                                                      : "split '" + config.split_file + "', setting '" + setting + "'";
   for (const auto& range : setting_.humans) {
-    auto human = HumanSequence::open(human_folder(config.root, range.name, config.dataset));
+    auto human = open_human(human_folder(config.root, range.name, config.dataset),
+                            {config.layout, config.person_id, smpl_, config.calibration_check});
     const int h = int(humans_.size());
+    const std::string calibration = human->calibration_file().string();
     for (int c = 0; c < human->num_cameras(); ++c) {
       const auto& cam = human->camera(c);
-      const std::string where = "'" + (human->dir() / "annots.npy").string() + "': camera " + std::to_string(c) + ": ";
+      const std::string where = "'" + calibration + "': camera " + std::to_string(c) + ": ";
+      const std::string named = " (camera '" + human->camera_name(c) + "')";
       const std::string unusable = unusable_intrinsics(cam.K);
-      if (!unusable.empty()) fail(where, unusable);
+      if (!unusable.empty()) fail(where, unusable, named);
       const std::string why = implausible_rotation(cam.R);
       if (!why.empty())
-        implausible(config.calibration_check, where + why, human->dir().string() + "#R" + std::to_string(c));
+        implausible(config.calibration_check, where + why + named, human->dir().string() + "#R" + std::to_string(c));
     }
-    auto check_view = [&](int v, const char* what) {
-      if (v < 0 || v >= human->num_cameras())
-        fail("split '", setting, "': ", what, " view ", v, " does not exist for ", range.name,
-             " (", human->num_cameras(), " cameras)");
+    const std::vector<int> frames = range.frames(human->num_frames());
+    if (frames.empty())
+      fail(split, ": ", range.name, " has ", human->num_frames(), " frames, none of them from frame ", range.begin);
+    // Reference views: data.reference_views, the setting's, or (no split) the most spread.
+    Views views;
+    const auto resolve = [&](const std::vector<CameraRef>& values, const std::string& where) {
+      std::vector<int> out;
+      for (const auto& v : values) out.push_back(camera_index(*human, v.text, where, v.index));
+      return out;
     };
-    for (int v : setting_.reference_views) check_view(v, "reference");
-    for (int v : setting_.target_views) check_view(v, "target");
-    if (setting_.random_references && setting_.num_reference_views > human->num_cameras())
-      fail("split '", setting, "': ", setting_.num_reference_views, " random references but ",
-           range.name, " has ", human->num_cameras(), " cameras");
-    std::vector<int> targets = setting_.target_views;
-    if (setting_.all_targets) {
-      targets.resize(human->num_cameras());
-      std::iota(targets.begin(), targets.end(), 0);
+    if (setting_.random_references) {
+      if (setting_.num_reference_views > human->num_cameras())
+        fail(split, ": ", setting_.num_reference_views, " random references but ", range.name, " has ",
+             human->num_cameras(), " cameras");
+    } else if (!config.reference_views.empty()) {
+      for (const auto& v : config.reference_views)
+        views.references.push_back(camera_index(*human, v, "data.reference_views"));
+      spdlog::info("{}: reference cameras {} (data.reference_views)", range.name, camera_list(*human, views.references));
+    } else if (!setting_.reference_views.empty()) {
+      views.references = resolve(setting_.reference_views, split + ", reference_views");
+    } else {
+      views.references = spread_cameras(*human, human->load_vertices(frames.front()), setting_.num_reference_views);
+      spdlog::info("{}: reference cameras {}: the {} most evenly spread around the body (data.reference_views "
+                   "or --reference-views chooses others)",
+                   range.name, camera_list(*human, views.references), views.references.size());
     }
-    for (int frame : range.frames(human->num_frames()))
-      for (int t : targets) items_.push_back({h, frame, t});
+    if (setting_.all_targets) {
+      for (int c = 0; c < human->num_cameras(); ++c)
+        if (!setting_.targets_exclude_references ||
+            std::find(views.references.begin(), views.references.end(), c) == views.references.end())
+          views.targets.push_back(c);
+      if (views.targets.empty())
+        fail(split, ": ", range.name, " has no camera left as a target besides its ", views.references.size(),
+             " reference views");
+    } else {
+      views.targets = resolve(setting_.target_views, split + ", target_views");
+    }
+    for (int frame : frames)
+      for (int t : views.targets) items_.push_back({h, frame, t});
     humans_.push_back(std::move(human));
+    views_.push_back(std::move(views));
   }
   spdlog::info("dataset: {} '{}' — {} humans, {} samples", config::name_of(config.dataset), setting, humans_.size(),
                items_.size());
 }
+
+const std::vector<int>& Dataset::reference_views(int human) const { return views_.at(size_t(human)).references; }
 
 FrameBody Dataset::load_body(const HumanSequence& human, int frame) const {
   const BodyParams params = human.load_params(frame);
@@ -149,7 +195,7 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     std::shuffle(all.begin(), all.end(), rng);
     s.reference_views.assign(all.begin(), all.begin() + setting_.num_reference_views);
   } else {
-    s.reference_views = setting_.reference_views;
+    s.reference_views = views_[size_t(it.human)].references;
   }
   JitterParams jitter;
   const bool jittered = train && config_.jitter.enabled;
@@ -166,7 +212,7 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
                                              view.rgb.cols, view.rgb.rows);
     if (!why.empty())
       implausible(config_.calibration_check,
-                  "'" + (human.dir() / "annots.npy").string() + "': reference camera " + std::to_string(v) +
+                  "'" + human.calibration_file().string() + "': reference camera " + std::to_string(v) +
                       " of frame " + std::to_string(it.frame) + ": " + why,
                   human.dir().string() + "#view" + std::to_string(v));
     images.push_back(image_tensor(view.rgb).permute({2, 0, 1}));
@@ -222,7 +268,7 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     if (cv::countNonZero(bmask) == 0)
       fail("sample '", human.name(), "' frame ", it.frame, ", target view ", s.target_view,
            ": the body's box is outside the image, no training patch can be sampled (is the body in that view? "
-           "check the calibration in '", (human.dir() / "annots.npy").string(), "')");
+           "check the calibration in '", human.calibration_file().string(), "')");
     const auto patches = sample_patches(person / 255, bmask, p.count, p.size, p.body_prob, rng);
     s.patch_rgb = torch::zeros({int64_t(patches.size()), 3, p.size, p.size}, torch::kFloat32);
     std::vector<torch::Tensor> px, slot;

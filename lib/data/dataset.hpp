@@ -17,7 +17,7 @@
 
 #include "core/config.hpp"
 #include "data/split.hpp"
-#include "data/zju_mocap.hpp"
+#include "data/sequence.hpp"
 
 namespace th::body {
 struct SmplModel;
@@ -64,8 +64,9 @@ struct Sample {
 class Dataset {
  public:
   enum class Mode { Train, Test };
-  // Reads the split setting and opens every human it names (annots.npy only). The body model
-  // supplies faces and LBS. Throws th::Error naming the missing folder or file.
+  // Reads the split setting (or, with data.split_file empty, takes every person under data.root)
+  // and opens every human it names (calibration and file lists only). The body model supplies
+  // faces and LBS. Throws th::Error naming the missing folder or file.
   Dataset(const DataConfig& config, const std::string& setting, Mode mode,
           std::shared_ptr<const body::SmplModel> smpl);
 
@@ -78,6 +79,8 @@ class Dataset {
   const Item& item(size_t index) const { return items_.at(index); }
   const std::vector<std::shared_ptr<HumanSequence>>& humans() const { return humans_; }
   const SplitSetting& setting() const { return setting_; }
+  // The fixed reference cameras of human `human` (empty with random references).
+  const std::vector<int>& reference_views(int human) const;
   const body::SmplModel& smpl() const { return *smpl_; }
   Mode mode() const { return mode_; }
 
@@ -97,6 +100,10 @@ class Dataset {
   Mode mode_;
   std::shared_ptr<const body::SmplModel> smpl_;
   std::vector<std::shared_ptr<HumanSequence>> humans_;
+  struct Views {
+    std::vector<int> references, targets;
+  };
+  std::vector<Views> views_;  // per human
   std::vector<Item> items_;
 };
 

@@ -2,6 +2,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <limits>
 #include <optional>
@@ -62,19 +63,22 @@ void check_person_name(const std::string& name, const std::string& where) {
          "', which spreadsheets read as a formula (per_image.csv); rename the folder");
 }
 
-// A view list: [i, ...], or the keyword (`random` / `all`) or an empty list for it.
+// A view list: [camera, ...] (indices or names), or the keyword (`random` / `all`) or an empty
+// list for it.
 bool read_views(const YAML::Node& node, const char* key, const char* keyword,
-                std::vector<int>& views, const std::string& where) {
+                std::vector<CameraRef>& views, const std::string& where) {
   const YAML::Node v = node[key];
   if (!v) fail(where, ": missing '", key, "'");
   if (v.IsScalar() && v.Scalar() == keyword) return true;
-  if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of camera indices or '", keyword, "'");
+  if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of cameras (indices or names) or '", keyword, "'");
   views.clear();
   for (const auto& item : v) {
-    const auto index = item.IsScalar() ? config::decimal_integer(item.Scalar()) : std::nullopt;
-    if (!index || *index < std::numeric_limits<int>::min() || *index > std::numeric_limits<int>::max())
-      fail(where, ": '", key, "' must be a list of camera indices (decimal integers)");
-    views.push_back(int(*index));
+    if (!item.IsScalar() || item.Scalar().empty())
+      fail(where, ": '", key, "' must be a list of cameras (calibration indices or camera names)");
+    // yaml-cpp tags a quoted scalar "!" and a plain one "?".
+    const bool plain = item.Tag() != "!";
+    const auto number = config::decimal_integer(item.Scalar());
+    views.push_back({item.Scalar(), plain && number.has_value()});
   }
   return views.empty();
 }
@@ -83,8 +87,8 @@ bool read_views(const YAML::Node& node, const char* key, const char* keyword,
 
 std::vector<int> HumanRange::frames(int num_frames) const {
   std::vector<int> out;
-  const int end = std::min(begin + ni, num_frames);
-  for (int f = begin; f < end; f += interval) out.push_back(f);
+  const int64_t end = std::min<int64_t>(int64_t(begin) + ni, num_frames);
+  for (int64_t f = begin; f < end; f += interval) out.push_back(int(f));
   return out;
 }
 
@@ -131,6 +135,36 @@ SplitSetting load_split(const std::filesystem::path& file, const std::string& na
   }
   if (!s.random_references && s.reference_views.empty()) fail(where, ": no reference views");
   if (!s.all_targets && s.target_views.empty()) fail(where, ": no target views");
+  return s;
+}
+
+SplitSetting whole_capture_setting(const std::filesystem::path& root, const std::string& name, bool training,
+                                   int num_reference_views) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::is_directory(root, ec)) fail("data.root '", root.string(), "' does not exist");
+  SplitSetting s;
+  s.name = name;
+  s.random_references = training;
+  s.num_reference_views = num_reference_views;
+  s.all_targets = true;
+  s.targets_exclude_references = !training;
+  std::vector<std::string> people;
+  for (const auto& entry : fs::directory_iterator(root)) {
+    const fs::path dir = entry.path();
+    if (!entry.is_directory(ec)) continue;
+    if (fs::is_regular_file(dir / "annots.npy", ec) || fs::is_regular_file(dir / "intri.yml", ec) ||
+        fs::is_regular_file(dir / "Posing" / "annots.npy", ec))
+      people.push_back(dir.filename().string());
+  }
+  std::sort(people.begin(), people.end());
+  if (people.empty())
+    fail("data.root '", root.string(), "' holds no person's folder (one with annots.npy, or intri.yml and extri.yml), ",
+         "and data.split_file is empty");
+  for (const auto& p : people) {
+    check_person_name(p, "data.root '" + root.string() + "'");
+    s.humans.push_back({p, 0, std::numeric_limits<int>::max(), 1});
+  }
   return s;
 }
 

@@ -21,18 +21,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// A (3,3)/(3,1)/(5,1) calibration entry as float64 of the expected shape.
-// Every value read from data must be a finite number: the error names the file, the entry and
-// the flat index of the first offender.
-void require_finite(const torch::Tensor& t, const fs::path& file, const std::string& what) {
-  const auto bad = (~torch::isfinite(t)).reshape({-1}).nonzero();
-  if (bad.numel() > 0) {
-    const int64_t i = bad[0][0].item<int64_t>();
-    fail("'", file.string(), "': ", what, " holds ", t.reshape({-1})[i].item<double>(), " at index ", i,
-         " (", bad.size(0), " non-finite value", bad.size(0) > 1 ? "s" : "", ")");
-  }
-}
-
 torch::Tensor calib(const io::Value& list, size_t cam, std::vector<int64_t> shape,
                     const std::string& what, const fs::path& file) {
   torch::Tensor t;
@@ -47,41 +35,6 @@ torch::Tensor calib(const io::Value& list, size_t cam, std::vector<int64_t> shap
          " values, expected ", n);
   require_finite(t, file, "cams['" + what + "'][" + std::to_string(cam) + "]");
   return t.reshape(shape).contiguous();
-}
-
-// A JPEG ends with the EOI marker (FF D9); libjpeg decodes a truncated file with only a warning
-// (grey lower rows), so a missing marker is an error here.
-bool jpeg_truncated(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary | std::ios::ate);
-  const auto size = static_cast<std::streamoff>(in.tellg());
-  if (!in || size < 4) return true;
-  const std::streamoff tail = std::min<std::streamoff>(size, 64);
-  std::string bytes(static_cast<size_t>(tail), '\0');
-  in.seekg(size - tail);
-  in.read(bytes.data(), tail);
-  return bytes.find("\xFF\xD9") == std::string::npos;
-}
-
-// uint8 -> float32 in [0, 1] as the reference computes it: a float32 division by 255 (OpenCV's
-// scaled conversion multiplies by 1/255 instead, which differs in the last bit for some values).
-cv::Mat to_unit_float(const cv::Mat& u8) {
-  cv::Mat out(u8.size(), CV_MAKETYPE(CV_32F, u8.channels()));
-  const cv::Mat src = u8.isContinuous() ? u8 : u8.clone();
-  const uint8_t* in = src.ptr<uint8_t>();
-  float* o = out.ptr<float>();
-  for (size_t i = 0, n = src.total() * src.channels(); i < n; ++i) o[i] = static_cast<float>(in[i]) / 255.0f;
-  return out;
-}
-
-cv::Mat read_image(const fs::path& path, int flags) {
-  refuse_special_file(path, "image");
-  cv::Mat img = cv::imread(path.string(), flags);
-  if (img.empty()) fail("cannot read image '", path.string(), "' (missing or corrupt)");
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  if ((ext == ".jpg" || ext == ".jpeg") && jpeg_truncated(path))
-    fail("image '", path.string(), "' is truncated (no JPEG end marker)");
-  return img;
 }
 
 torch::Tensor flat_f64(const io::Value& dict, const char* key, int64_t expected,
@@ -117,7 +70,7 @@ int frame_number_of(const std::string& filename) {
   return parse(stem);
 }
 
-std::shared_ptr<HumanSequence> HumanSequence::open(const fs::path& dir) {
+std::shared_ptr<ZjuMocapSequence> ZjuMocapSequence::open(const fs::path& dir) {
   if (!fs::is_directory(dir)) fail("human folder '", dir.string(), "' does not exist");
   const fs::path file = dir / "annots.npy";
   refuse_special_file(file, "annotations");
@@ -125,9 +78,7 @@ std::shared_ptr<HumanSequence> HumanSequence::open(const fs::path& dir) {
     fail("'", file.string(), "' is missing (every human folder needs its annots.npy)");
   const io::Value annots = io::read_npy_value(file);
 
-  std::shared_ptr<HumanSequence> h(new HumanSequence());
-  h->dir_ = dir;
-  h->name_ = dir.filename().string();
+  std::shared_ptr<ZjuMocapSequence> h(new ZjuMocapSequence(dir.filename().string(), dir));
   try {
     const io::Value& cams = annots["cams"];
     const size_t n = cams["K"].size();
@@ -155,25 +106,23 @@ std::shared_ptr<HumanSequence> HumanSequence::open(const fs::path& dir) {
     fail("'", file.string(), "': ", what);
   }
   if (h->ims_.empty()) fail("'", file.string(), "' lists no frames");
+  for (const auto& image : h->ims_.front()) {
+    const std::string folder = fs::path(image).parent_path().string();
+    h->camera_names_.push_back(folder.empty() ? std::to_string(h->camera_names_.size()) : folder);
+  }
   return h;
 }
 
-const Camera& HumanSequence::camera(int index) const {
-  if (index < 0 || index >= num_cameras())
-    fail(name_, ": camera ", index, " does not exist (", num_cameras(), " cameras)");
-  return cameras_[index];
-}
-
-fs::path HumanSequence::resolve(const fs::path& relative) const {
+fs::path ZjuMocapSequence::resolve(const fs::path& relative) const {
   if (auto found = find(relative)) return *found;
-  const fs::path direct = dir_ / relative, folder = direct.parent_path();
+  const fs::path direct = dir() / relative, folder = direct.parent_path();
   if (!fs::is_directory(folder))
     fail("folder '", folder.string(), "' is missing (needed for '", relative.string(), "')");
   fail("file '", direct.string(), "' is missing (listed in annots.npy)");
 }
 
-std::optional<fs::path> HumanSequence::find(const fs::path& relative) const {
-  const fs::path direct = dir_ / relative;
+std::optional<fs::path> ZjuMocapSequence::find(const fs::path& relative) const {
+  const fs::path direct = dir() / relative;
   if (fs::exists(direct)) return direct;
   // Renamed or original CoreView_313/315 names: look the frame number up in the folder.
   const fs::path folder = direct.parent_path();
@@ -197,29 +146,29 @@ std::optional<fs::path> HumanSequence::find(const fs::path& relative) const {
   return std::nullopt;
 }
 
-fs::path HumanSequence::image_path(int frame, int cam) const {
+fs::path ZjuMocapSequence::image_path(int frame, int cam) const {
   if (frame < 0 || frame >= num_frames())
-    fail(name_, ": frame ", frame, " does not exist (annots lists ", num_frames(), ")");
+    fail(name(), ": frame ", frame, " does not exist (annots lists ", num_frames(), ")");
   camera(cam);
   return resolve(ims_[frame][cam]);
 }
 
-int HumanSequence::frame_number(int frame) const {
-  const std::string& name = ims_.at(frame).at(0);
-  const int n = frame_number_of(fs::path(name).filename().string());
-  if (n < 0) fail(name_, ": cannot read a frame number from image name '", name, "'");
+int ZjuMocapSequence::frame_number(int frame) const {
+  const std::string& image = ims_.at(size_t(frame)).at(0);
+  const int n = frame_number_of(fs::path(image).filename().string());
+  if (n < 0) fail(name(), ": cannot read a frame number from image name '", image, "'");
   return n;
 }
 
-fs::path HumanSequence::body_file(const char* kind, const char* legacy, int frame) const {
+fs::path ZjuMocapSequence::body_file(const char* kind, const char* legacy, int frame) const {
   const std::string file = std::to_string(frame_number(frame)) + ".npy";
-  const fs::path modern = dir_ / kind / file, old = dir_ / legacy / file;
+  const fs::path modern = dir() / kind / file, old = dir() / legacy / file;
   if (fs::exists(modern)) return modern;
   if (fs::exists(old)) return old;
   fail("'", modern.string(), "' is missing (nor is there '", old.string(), "')");
 }
 
-BodyParams HumanSequence::load_params(int frame) const {
+BodyParams ZjuMocapSequence::load_params(int frame) const {
   const fs::path file = body_file("new_params", "params", frame);
   const io::Value dict = io::read_npy_value(file);
   if (dict.kind() != io::Value::Kind::Dict) fail("'", file.string(), "' must hold a dict, not ", dict.type_name());
@@ -227,7 +176,7 @@ BodyParams HumanSequence::load_params(int frame) const {
           flat_f64(dict, "Th", 3, file), flat_f64(dict, "shapes", 0, file)};
 }
 
-torch::Tensor HumanSequence::load_vertices(int frame) const {
+torch::Tensor ZjuMocapSequence::load_vertices(int frame) const {
   const fs::path file = body_file("new_vertices", "vertices", frame);
   const torch::Tensor v = io::read_npy(file);
   if (v.dim() != 2 || v.size(1) != 3)
@@ -236,14 +185,14 @@ torch::Tensor HumanSequence::load_vertices(int frame) const {
   return v.to(torch::kFloat64);
 }
 
-cv::Mat HumanSequence::load_mask(int frame, int cam) const {
+cv::Mat ZjuMocapSequence::load_mask(int frame, int cam) const {
   image_path(frame, cam);  // checks the indices
   fs::path rel = ims_[frame][cam];
   rel.replace_extension(".png");
   cv::Mat mask;
   std::vector<std::string> tried;
   for (const char* folder : {"mask", "mask_cihp"}) {
-    tried.push_back((dir_ / folder / rel).string());
+    tried.push_back((dir() / folder / rel).string());
     const auto p = find(folder / rel);
     if (!p) continue;
     cv::Mat m = read_image(*p, cv::IMREAD_GRAYSCALE);
@@ -267,58 +216,6 @@ fs::path visibility_file(const fs::path& root, const HumanSequence& human, int f
   char name[32];
   std::snprintf(name, sizeof name, "%0*d.npy", width, number);
   return root / human.name() / "visibility" / image.parent_path() / name;
-}
-
-ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOptions& o) {
-  const fs::path path = human.image_path(frame, cam);
-  cv::Mat bgr = read_image(path, cv::IMREAD_COLOR);
-  // Smaller images leave the encoder's last stage (stride 32) without a pixel to look at.
-  constexpr int kMinSide = 8;
-  const cv::Size size(int(bgr.cols * o.ratio), int(bgr.rows * o.ratio));
-  if (size.width < kMinSide || size.height < kMinSide)
-    fail("image '", path.string(), "' is ", bgr.cols, "x", bgr.rows, " pixels; at data.ratio ",
-         o.ratio, " it would be ", size.width, "x", size.height, ", below the ", kMinSide, "x",
-         kMinSide, " the network needs");
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  rgb = to_unit_float(rgb);
-  cv::Mat mask = human.load_mask(frame, cam);
-  if (mask.size() != rgb.size())
-    fail("mask of '", path.string(), "' is ", mask.cols, "x", mask.rows, " but the image is ",
-         rgb.cols, "x", rgb.rows);
-  if (o.jitter) apply_jitter(rgb, *o.jitter);
-
-  const auto mark_band = [](cv::Mat& m) {  // METHOD 2.1 step 6: target mask only
-    const cv::Mat kernel = cv::Mat::ones(5, 5, CV_8U);
-    cv::Mat eroded, dilated;
-    cv::erode(m, eroded, kernel);
-    cv::dilate(m, dilated, kernel);
-    m.setTo(100, (dilated - eroded) == 1);
-  };
-  if (o.border_band && o.band_before_undistort) mark_band(mask);
-
-  const Camera& calib = human.camera(cam);
-  // The reference undistorts with K and D rounded to float32 [parity].
-  const auto f32 = [](const torch::Tensor& t) { return t.to(torch::kFloat32).to(torch::kFloat64); };
-  const cv::Mat K = geometry::to_cv(f32(calib.K)), D = geometry::to_cv(f32(calib.D));
-  cv::Mat und_rgb, und_mask;
-  cv::undistort(rgb, und_rgb, K, D);
-  cv::undistort(mask, und_mask, K, D);
-  if (o.border_band && !o.band_before_undistort) mark_band(und_mask);
-
-  ViewImage view;
-  if (size != rgb.size()) {
-    cv::resize(und_rgb, view.rgb, size, 0, 0, cv::INTER_AREA);
-    cv::resize(und_mask, view.mask, size, 0, 0, cv::INTER_NEAREST);
-  } else {
-    view.rgb = und_rgb;
-    view.mask = und_mask;
-  }
-  view.rgb.setTo(cv::Scalar::all(0), view.mask == 0);
-  view.camera = calib;
-  view.camera.K = calib.K.clone();
-  view.camera.K.slice(0, 0, 2) *= o.ratio;
-  return view;
 }
 
 }  // namespace th::data

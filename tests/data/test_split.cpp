@@ -99,7 +99,7 @@ TEST_CASE("an unknown setting or a missing human folder is named in the error", 
                     Catch::Contains("CoreView_387") && Catch::Contains("does not exist"));
   write_annots(root, "CoreView_387", 30, 5);
   CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
-                    Catch::Contains("view 7 does not exist for CoreView_387"));
+                    Catch::Contains("reference_views: camera 7 does not exist for CoreView_387 (5 cameras"));
 }
 
 TEST_CASE("split integers are decimal and person names hold no control character or formula", "[split]") {
@@ -112,8 +112,9 @@ TEST_CASE("split integers are decimal and person names hold no control character
   };
   const auto s = th::data::load_split(split_with("CoreView_1", "010"), "s");
   CHECK(s.humans.at(0).begin == 10);
-  CHECK(s.reference_views == std::vector<int>{0, 7});
-  CHECK(s.target_views == std::vector<int>{10});
+  // Plain numbers are decimal calibration indices.
+  CHECK(s.reference_views == std::vector<th::data::CameraRef>{{"0", true}, {"07", true}});
+  CHECK(s.target_views == std::vector<th::data::CameraRef>{{"010", true}});
   CHECK_THROWS_WITH(th::data::load_split(split_with("CoreView_1", "0x10"), "s"),
                     Catch::Contains("humans[0]: 'begin' must be a decimal integer"));
   CHECK_THROWS_WITH(th::data::load_split(split_with("\"Core\\nView\"", "0"), "s"),

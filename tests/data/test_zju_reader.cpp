@@ -7,6 +7,7 @@
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "data/dataset.hpp"
+#include "data/zju_mocap.hpp"
 #include "geometry/camera.hpp"
 #include "io/npy.hpp"
 #include "support/test_env.hpp"
@@ -121,7 +122,7 @@ TEST_CASE("CoreView_313 images resolve under original and renamed names", "[data
     std::snprintf(name, sizeof name, "%04d.jpg", n);
     fs::rename(e.path(), cam / name);  // the usual renaming, annots.npy untouched
   }
-  auto human = HumanSequence::open(root / "CoreView_313");
+  auto human = ZjuMocapSequence::open(root / "CoreView_313");
   CHECK(human->image_path(0, 0).filename() == "0001.jpg");
   CHECK(human->image_path(0, 1).filename().string().rfind("CoreView_313_Camera_(2)_0001", 0) == 0);
   CHECK(human->frame_number(0) == 1);
@@ -232,11 +233,11 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
   const fs::path vis_root = root / "zju_rasterization";
   // The zju_rasterization names: Camera_B<k>/%06d.npy, and for CoreView_313/315 (whose images
   // keep their original long names here) Camera (<k>)/%04d.npy of the 1-based frame number.
-  const auto h313 = HumanSequence::open(root / "CoreView_313");
+  const auto h313 = ZjuMocapSequence::open(root / "CoreView_313");
   CHECK(h313->image_path(0, 0).filename().string().rfind("CoreView_313_Camera_(1)_0001", 0) == 0);
   CHECK(visibility_file(vis_root, *h313, 0, 0) == vis_root / "CoreView_313" / "visibility" / "Camera (1)" / "0001.npy");
   CHECK(visibility_file(vis_root, *h313, 1, 2) == vis_root / "CoreView_313" / "visibility" / "Camera (3)" / "0002.npy");
-  const auto s03 = HumanSequence::open(root / "CoreView_s03");
+  const auto s03 = ZjuMocapSequence::open(root / "CoreView_s03");
   CHECK(visibility_file(vis_root, *s03, 0, 4) == vis_root / "CoreView_s03" / "visibility" / "Camera_B5" / "000000.npy");
 
   // Files for every view of every person: the dataset reads them as they are.
@@ -248,7 +249,7 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
   torch::manual_seed(3);
   std::map<fs::path, torch::Tensor> written;
   for (const char* name : {"CoreView_313", "CoreView_396", "CoreView_s03"}) {
-    const auto human = HumanSequence::open(root / name);
+    const auto human = ZjuMocapSequence::open(root / name);
     for (int f = 0; f < human->num_frames(); ++f)
       for (int k = 0; k < human->num_cameras(); ++k) {
         const fs::path file = visibility_file(vis_root, *human, f, k);
@@ -285,7 +286,7 @@ TEST_CASE("the target mask's border band is marked before undistortion, as the r
   const auto ref_mask = th::io::read_npy(out / "mask.npy");
   const auto ref_image = th::io::read_npy(out / "image.npy");
 
-  const auto human = HumanSequence::open(dir);
+  const auto human = ZjuMocapSequence::open(dir);
   ViewOptions o;
   o.ratio = 0.5;
   o.border_band = true;

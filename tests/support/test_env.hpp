@@ -98,5 +98,7 @@ inline int run_python(const std::string& script, const std::string& args) {
 inline std::filesystem::path tiny_dataset(bool exact = false) {
   return test_tmp_root() / (exact ? "synth_tiny_exact" : "synth_tiny");
 }
+// The tiny dataset's people in EasyMocap's layout (`synth_tiny_easymocap_dataset`).
+inline std::filesystem::path tiny_easymocap_dataset() { return test_tmp_root() / "synth_tiny_easymocap"; }
 
 }  // namespace th::test
