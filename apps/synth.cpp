@@ -1,7 +1,8 @@
-// transhuman-synth: writes the synthetic multi-view human dataset (ZJU-MoCap layout).
+// transhuman-synth: writes the synthetic multi-view human dataset (ZJU-MoCap's layout, or
+// EasyMocap's with --layout easymocap).
 //
 //   transhuman-synth --out data/synthetic [--config configs/synth/default.yaml] [key=value ...]
-//                    [--force]
+//                    [--layout zju_mocap|easymocap] [--force]
 
 #include <spdlog/spdlog.h>
 
@@ -17,18 +18,22 @@
 
 int main(int argc, char** argv) {
   return th::app::guarded_main("transhuman-synth", [&] {
-    CLI::App cli{"Writes a synthetic multi-view human dataset in the ZJU-MoCap layout."};
-    std::string out, config_file = "configs/synth/default.yaml";
+    CLI::App cli{"Writes a synthetic multi-view human dataset in ZJU-MoCap's or EasyMocap's layout."};
+    std::string out, config_file = "configs/synth/default.yaml", layout;
     std::vector<std::string> overrides;
     bool force = false, verbose = false;
     cli.add_option("-o,--out", out, "dataset folder to write")->required();
     cli.add_option("-c,--config", config_file, "YAML config (may name a parent config)")
         ->capture_default_str();
+    cli.add_option("--layout", layout, "zju_mocap (annots.npy) or easymocap (intri.yml, extri.yml, output/smpl); "
+                   "default: the config's `layout`")
+        ->check(CLI::IsMember({"zju_mocap", "easymocap"}));
     cli.add_flag("--force", force, "replace an existing dataset made with another config");
     cli.add_flag("-v,--verbose", verbose, "debug logging");
     cli.add_option("overrides", overrides, "config overrides, e.g. seed=3 frames=30");
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::logging::init_console(verbose);
+    if (!layout.empty()) overrides.push_back("layout=" + layout);
 
     const auto config = th::config::from_tree<th::synth::SynthConfig>(
         th::config::load_tree(config_file, overrides));

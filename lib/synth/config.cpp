@@ -9,6 +9,8 @@ namespace th::synth {
 
 void validate_section(const SynthConfig& c, const std::string& path) {
   auto key = [&](const char* k) { return path.empty() ? std::string(k) : path + "." + k; };
+  if (c.layout != "zju_mocap" && c.layout != "easymocap")
+    fail("config key '", key("layout"), "': must be zju_mocap or easymocap, got '", c.layout, "'");
   if (c.frames < 1) fail("config key '", key("frames"), "': must be >= 1, got ", c.frames);
   if (c.threads < 1) fail("config key '", key("threads"), "': must be >= 1, got ", c.threads);
   if (c.people.train.empty() && c.people.unseen.empty())
@@ -43,8 +45,12 @@ void validate_section(const SynthConfig& c, const std::string& path) {
 }
 
 std::string config_text(const SynthConfig& config) {
+  YAML::Node tree = config::to_tree(config);
+  // The default layout is left out, so a dataset written before the key existed is still the
+  // same dataset.
+  if (config.layout == "zju_mocap") tree.remove("layout");
   YAML::Emitter e;
-  e << config::to_tree(config);
+  e << tree;
   return std::string("# transhuman-synth: the resolved configuration of this dataset.\n") +
          e.c_str() + "\n";
 }

@@ -52,6 +52,9 @@ struct SynthSplitConfig {
 };
 
 struct SynthConfig {
+  // zju_mocap: annots.npy, new_params/, new_vertices/ (METHOD 1.1); easymocap: intri.yml,
+  // extri.yml, images/, mask/, output/smpl/ (data/easymocap.hpp), the same people and pixels.
+  std::string layout = "zju_mocap";
   int64_t seed = 1;
   int frames = 60;  // frames per person
   int threads = 2;  // render workers
@@ -104,6 +107,7 @@ void visit_fields(V& v, SynthSplitConfig& c) {
 }
 template <class V>
 void visit_fields(V& v, SynthConfig& c) {
+  v("layout", c.layout);
   v("seed", c.seed);
   v("frames", c.frames);
   v("threads", c.threads);

@@ -9,6 +9,8 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <nlohmann/json.hpp>
+#include <opencv2/core/persistence.hpp>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -93,6 +95,69 @@ io::Value array_value(const torch::Tensor& t) { return io::Value::array(t.contig
 
 torch::Tensor row(const std::array<double, 3>& v) {
   return torch::tensor({v[0], v[1], v[2]}, torch::kFloat64);
+}
+
+// EasyMocap's layout (data/easymocap.hpp): cameras named by calibration index ("00".."22"), so
+// that the split file's indices and the names agree (data::camera_index refuses a number that
+// names one camera and indexes another), frames numbered from 0 with six digits.
+std::string easymocap_camera(int camera) {
+  char name[8];
+  std::snprintf(name, sizeof name, "%02d", camera);
+  return name;
+}
+
+std::string easymocap_frame(int frame) {
+  char name[16];
+  std::snprintf(name, sizeof name, "%06d", frame);
+  return name;
+}
+
+std::vector<double> values(const torch::Tensor& t) {
+  const auto c = t.to(torch::kFloat64).contiguous();
+  return std::vector<double>(c.data_ptr<double>(), c.data_ptr<double>() + c.numel());
+}
+
+// One frame's fit as EasyMocap writes it: a list of people (one here, id 0). nlohmann writes
+// doubles with the digits that read back to the same value.
+std::string easymocap_smpl(const torch::Tensor& poses, const torch::Tensor& Rh, const torch::Tensor& Th,
+                           const torch::Tensor& shapes) {
+  nlohmann::ordered_json person;
+  person["id"] = 0;
+  person["Rh"] = {values(Rh)};
+  person["Th"] = {values(Th)};
+  person["poses"] = {values(poses)};
+  person["shapes"] = {values(shapes)};
+  return nlohmann::ordered_json::array({person}).dump() + "\n";
+}
+
+cv::Mat cv_matrix(const torch::Tensor& t, int rows, int cols) {
+  const auto v = values(t);
+  return cv::Mat(rows, cols, CV_64F, const_cast<double*>(v.data())).clone();
+}
+
+// intri.yml and extri.yml of one person, holding what the ZJU-MoCap reader makes of annots.npy
+// (T through millimetres and back), so both layouts of a person read the same.
+void write_easymocap_calibration(const fs::path& dir, const FolderLayout& l, const std::vector<CameraCalib>& cameras) {
+  std::vector<std::string> names;
+  for (int k = 0; k < l.num_cameras(); ++k) names.push_back(easymocap_camera(k));
+  for (const char* file : {"intri.yml", "extri.yml"}) {
+    const bool intri = std::string(file) == "intri.yml";
+    cv::FileStorage out(".yml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY);
+    out << "names" << names;
+    for (size_t k = 0; k < cameras.size(); ++k) {
+      const CameraCalib& cam = cameras[k];
+      if (intri) {
+        out << "K_" + names[k] << cv_matrix(cam.K, 3, 3);
+        out << "dist_" + names[k] << cv_matrix(cam.D, 1, 5);
+      } else {
+        const torch::Tensor T = (cam.T * 1000.0).to(torch::kFloat64) / 1000.0;
+        out << "R_" + names[k] << cv_matrix(geometry::axis_angle(cam.R.to(torch::kFloat64)), 3, 1);
+        out << "Rot_" + names[k] << cv_matrix(cam.R, 3, 3);
+        out << "T_" + names[k] << cv_matrix(T, 3, 1);
+      }
+    }
+    write_bytes(dir / file, out.releaseAndGetString());
+  }
 }
 
 // Everything about one person that the frame tasks share.
@@ -250,9 +315,18 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   const std::vector<int> jpeg = {cv::IMWRITE_JPEG_QUALITY, c.image.jpeg_quality,
                                  cv::IMWRITE_JPEG_OPTIMIZE, 1};
   const std::vector<int> png = {cv::IMWRITE_PNG_COMPRESSION, 6};
+  const bool easymocap = c.layout == "easymocap";
   for (int i = 0; i < P; ++i) {
     const fs::path dir = out / names[i];
     const FolderLayout& l = recs[i].layout;
+    if (easymocap) {
+      for (int k = 0; k < l.num_cameras(); ++k) {
+        fs::create_directories(dir / "images" / easymocap_camera(k));
+        fs::create_directories(dir / "mask" / easymocap_camera(k));
+      }
+      fs::create_directories(dir / "output" / "smpl");
+      continue;
+    }
     for (int k = 0; k < l.num_cameras(); ++k) {
       fs::create_directories(dir / l.camera_folder(k));
       if (recs[i].person.masks != MaskStyle::Cihp)
@@ -288,6 +362,10 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
         torch::tensor(std::vector<double>(pub.poses.begin(), pub.poses.end()), torch::kFloat64);
     const auto fitted = body::lbs(body.model, poses, r.published_shapes);
     auto verts = body::smpl_to_world(fitted.vertices, row(pub.Rh), row(pub.Th));
+    if (easymocap) {
+      write_bytes(dir / "output" / "smpl" / (easymocap_frame(f) + ".json"),
+                  easymocap_smpl(poses, row(pub.Rh), row(pub.Th), r.published_shapes));
+    } else {
     io::Value::Dict params;
     params.emplace_back(io::Value::str("poses"), array_value(poses.reshape({1, 72})));
     params.emplace_back(io::Value::str("Rh"), array_value(row(pub.Rh).reshape({1, 3})));
@@ -296,15 +374,30 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
                         array_value(r.published_shapes.reshape({1, kNumBetas})));
     io::write_npy_value(dir / r.layout.params_path(f), io::Value::dict(std::move(params)));
     io::write_npy(dir / r.layout.vertices_path(f), verts.to(torch::kFloat32));
+    }
 
     const double gx = truth.Th[0], gy = truth.Th[1];
     for (int k = 0; k < r.layout.num_cameras(); ++k) {
       const RenderedView v =
           render_view(pm, r.views[k], c.image.width, c.image.height, c.image.supersample, gx, gy);
-      write_image(dir / r.layout.image_path(f, k), v.bgr, jpeg);
+      const std::string camera = easymocap_camera(k), frame = easymocap_frame(f);
+      write_image(easymocap ? dir / "images" / camera / (frame + ".jpg") : dir / r.layout.image_path(f, k), v.bgr, jpeg);
       cv::Mat coverage = v.alpha > 0.5f;  // 255 where covered
       cv::Mat mask = coverage / 255;      // ZJU-MoCap masks are 0/1
-      if (r.person.masks == MaskStyle::Both) {
+      if (easymocap) {
+        // One mask, 0/255: what the ZJU-MoCap reader makes of mask/ and mask_cihp/ together.
+        cv::Mat person;
+        if (r.person.masks == MaskStyle::Both) {
+          cv::Mat missed = (v.labels == cihp::kHair) | (v.labels == cihp::kLeftShoe) | (v.labels == cihp::kRightShoe);
+          mask.setTo(0, missed);
+          person = (mask != 0) | ((v.labels != 0) & (v.alpha > 0.75f));
+        } else if (r.person.masks == MaskStyle::Mask) {
+          person = mask != 0;
+        } else {
+          person = (v.labels != 0) & coverage;
+        }
+        write_bytes(dir / "mask" / camera / (frame + ".png"), encode_mask_png(person));
+      } else if (r.person.masks == MaskStyle::Both) {
         // Two parsers that each miss something: the matting misses hair and shoes, the part
         // parser is tighter at the edges; the loader's union restores the person (METHOD 2.1).
         cv::Mat missed = (v.labels == cihp::kHair) | (v.labels == cihp::kLeftShoe) |
@@ -339,6 +432,13 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
   // annots.npy per person (METHOD 1.1): cams {K, R, T (mm), D} and ims [{ims: [paths]}].
   for (int i = 0; i < P; ++i) {
     const Recording& r = recs[i];
+    summary.lines.push_back(names[i] + (r.person.unseen ? " (unseen)" : "") + ": " +
+                            std::to_string(r.layout.num_cameras()) + " cameras; " +
+                            r.person.description + "; motion: " + r.motion.script);
+    if (easymocap) {
+      write_easymocap_calibration(out / names[i], r.layout, r.cameras);
+      continue;
+    }
     io::Value::List K, R, T, D, ims;
     for (const auto& cam : r.cameras) {
       K.push_back(array_value(cam.K));
@@ -363,9 +463,6 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
     annots.emplace_back(io::Value::str("cams"), io::Value::dict(std::move(cams)));
     annots.emplace_back(io::Value::str("ims"), io::Value::list(std::move(ims)));
     io::write_npy_value(out / names[i] / "annots.npy", io::Value::dict(std::move(annots)));
-    summary.lines.push_back(names[i] + (r.person.unseen ? " (unseen)" : "") + ": " +
-                            std::to_string(r.layout.num_cameras()) + " cameras; " +
-                            r.person.description + "; motion: " + r.motion.script);
   }
 
   write_bytes(out / "split.yaml", split_yaml(c));

@@ -1,6 +1,8 @@
 #pragma once
 // transhuman-synth's library side: writes a synthetic multi-view human dataset in the exact
-// ZJU-MoCap layout (METHOD 1.1) with its body model (METHOD 1.5) and split file (METHOD 1.2).
+// ZJU-MoCap layout (METHOD 1.1) with its body model (METHOD 1.5) and split file (METHOD 1.2);
+// with `layout: easymocap`, the same people and pixels in EasyMocap's layout (data/easymocap.hpp:
+// intri.yml, extri.yml, images/<camera>/, mask/<camera>/, output/smpl/<frame>.json).
 //
 // <out>/smpl_model.npz, smpl_model.pkl      the body model (np.savez / SMPL-style pickle)
 // <out>/<Human>/annots.npy                  cams {K, R, T (mm), D}, ims [{ims: [paths]}]
