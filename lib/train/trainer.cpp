@@ -188,6 +188,10 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
     last_ckpt_ = ckpt_dir_ / "latest.pt";
     st_ = pipeline::load_checkpoint(last_ckpt_, *model_, *optim_);
     spdlog::info("resumed from {} at epoch {}, step {}", last_ckpt_.string(), st_.epoch, st_.step);
+  } else if (!options.init_from.empty() && lead_) {
+    pipeline::load_weights(*model_, options.init_from);
+    spdlog::info("fine-tuning: weights and token groups from {}; optimiser and schedule start afresh",
+                 options.init_from.string());
   }
   // The token groups: the resumed checkpoint's, or made now from model.grouping (the only place
   // the k-means runs); the other ranks receive rank 0's with its state below.

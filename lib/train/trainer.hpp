@@ -31,6 +31,9 @@ struct TrainOptions {
   int virtual_ranks = 1;
   // Tests: every rank writes its final state to <dir>/rank<r>.pt (empty: not written).
   std::filesystem::path rank_state_dir = {};
+  // Fine-tuning: start from this checkpoint's weights and token groups (ours .pt or the
+  // reference's .pth), with a fresh optimiser and schedule. Empty: model.* initialisation.
+  std::filesystem::path init_from = {};
 };
 
 struct TrainSummary {
