@@ -1,0 +1,33 @@
+#pragma once
+// The network of METHOD 3 as one plain forward pass, in the paper's order: painting (3.1),
+// TransHE (3.2), DPaRF (3.3), FDI and the heads (3.4). It is the definition that the fast
+// forms of TransHumanImpl (model/forms.hpp, the exact shortcuts of METHOD 9, the CPU kernels)
+// are tested against: plain LibTorch operations only, on any device and under autograd, with
+// the model's own parameters (it creates none) and each ablation of ModelConfig an `if` where
+// the paper's text varies it.
+//
+// Everything is evaluated per call, the per-frame stages included (no FrameCache), in the
+// parameters' floating-point type (fp32: the model's products are not consulted). BatchNorm
+// normalises as the model's modules do (batch or running statistics) but never updates the
+// running statistics; synchronised BatchNorm over several ranks is not part of it.
+
+#include <torch/types.h>
+
+#include "model/inputs.hpp"
+#include "model/transhuman.hpp"
+
+namespace th::model {
+
+struct NetworkOutput {
+  torch::Tensor rgb;    // (N, 3) raw colour logits
+  torch::Tensor sigma;  // (N) raw density sigma_raw
+  // (N, 4) = [rgb, sigma], the layout of TransHumanImpl::forward.
+  torch::Tensor raw() const;
+};
+
+// The frame `in` (reference views, cameras, body, token groups), pts: (N, 3) world points and
+// dirs: (N, 3) their ray directions (any length) -> density and colour of every point.
+NetworkOutput network_forward(const TransHumanImpl& model, const FrameInputs& in,
+                              const torch::Tensor& pts, const torch::Tensor& dirs);
+
+}  // namespace th::model
