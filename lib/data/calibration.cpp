@@ -37,9 +37,11 @@ std::string implausible_view(const torch::Tensor& vertices, const torch::Tensor&
   const auto center = -torch::mm(r.t(), t).flatten();  // the camera's centre in the world
   const double distance = (v.mean(0) - center).norm().item<double>();
   if (!(distance >= CalibrationLimits::kMinDistance && distance <= CalibrationLimits::kMaxDistance))
-    return fmt::format("the camera is {:.3g} m from the body's centre (plausible: {} to {} m; T in metres "
-                       "where millimetres are expected?)",
-                       distance, CalibrationLimits::kMinDistance, CalibrationLimits::kMaxDistance);
+    return fmt::format("the camera is {:.3g} m from the body's centre (plausible: {} to {} m; {})", distance,
+                       CalibrationLimits::kMinDistance, CalibrationLimits::kMaxDistance,
+                       distance < CalibrationLimits::kMinDistance
+                           ? "T in metres where the file holds millimetres, as ZJU-MoCap's annots.npy?"
+                           : "T in millimetres where the file holds metres, as EasyMocap's extri.yml?");
   const auto cam = torch::mm(v, r.t()) + t.t();  // (N, 3) camera coordinates
   const auto z = cam.select(1, 2);
   const auto px = torch::mm(cam, k.t());

@@ -153,8 +153,9 @@ SplitSetting whole_capture_setting(const std::filesystem::path& root, const std:
   for (const auto& entry : fs::directory_iterator(root)) {
     const fs::path dir = entry.path();
     if (!entry.is_directory(ec)) continue;
-    if (fs::is_regular_file(dir / "annots.npy", ec) || fs::is_regular_file(dir / "intri.yml", ec) ||
-        fs::is_regular_file(dir / "Posing" / "annots.npy", ec))
+    // What data::detect_layout reads (either calibration file: the reader names the other).
+    if (fs::exists(dir / "annots.npy", ec) || fs::exists(dir / "intri.yml", ec) || fs::exists(dir / "extri.yml", ec) ||
+        fs::exists(dir / "Posing" / "annots.npy", ec))
       people.push_back(dir.filename().string());
   }
   std::sort(people.begin(), people.end());

@@ -10,7 +10,8 @@ apps=$(cd "$1" && pwd) easymocap=$(cd "$2" && pwd) ckpt=$(realpath "$3") python=
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 work=$(mktemp -d "${TMPDIR:-/tmp}/th-capture.XXXXXX")
 server=""
-trap '[[ -n $server ]] && kill "$server" 2>/dev/null; rm -rf "$work"' EXIT
+# The viewer runs in its own process group ($server is its leader), stopped as a whole.
+trap '[[ -n $server ]] && kill -- "-$server" 2>/dev/null; rm -rf "$work"' EXIT
 fail() { echo "check_your_capture: FAIL: $*" >&2; exit 1; }
 
 # The capture: one person of the synthetic dataset, as a user's folder would hold it.
@@ -48,7 +49,7 @@ for block in "$work"/blocks/*; do
   echo "--- $(basename "$block"): $(head -1 "$block")"
   if [[ $kind == server ]]; then
     sed -E "s/--port [0-9]+/--port $port/" "$block" > "$work/server.sh"
-    bash -c "set -euo pipefail; source '$work/settings.sh'; source '$work/server.sh'" > "$work/server.log" 2>&1 &
+    setsid bash -c "set -euo pipefail; source '$work/settings.sh'; source '$work/server.sh'" > "$work/server.log" 2>&1 &
     server=$!
     "$python" - "$port" <<'PY' || { cat "$work/server.log"; fail "the viewer did not answer"; }
 import json, sys, time, urllib.request
@@ -62,7 +63,10 @@ for _ in range(240):
         time.sleep(0.5)
 sys.exit(1)
 PY
-    kill "$server"; wait "$server" 2>/dev/null || true; server=""
+    kill -- "-$server"; wait "$server" 2>/dev/null || true
+    for _ in $(seq 50); do pgrep -g "$server" > /dev/null || break; sleep 0.2; done
+    if pgrep -g "$server" > /dev/null; then kill -9 -- "-$server"; fail "the viewer did not stop within 10 s of SIGTERM"; fi
+    server=""
     continue
   fi
   bash -c "set -euo pipefail; source '$work/settings.sh'; source '$block'" > "$work/block.log" 2>&1 ||
