@@ -30,7 +30,8 @@ int main(int argc, char** argv) {
     th::app::apply_model_options(model, options);
     options.scoring = true;
 
-    if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-eval", "runs/eval"))
+    if (const auto code =
+            th::app::launch_ranks(nproc, options, argc, argv, "transhuman-eval", "runs/eval"))
       return *code;
     const auto role = th::app::rank_role(options);
     const auto ctx = th::app::start_run(options, "transhuman-eval",
@@ -39,7 +40,8 @@ int main(int argc, char** argv) {
     if (role.lead) th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     if (options.dry_run) return 0;
     const auto comm = th::app::join_ranks(role, ctx);
-    const auto summary = th::eval::evaluate(ctx.config, ctx.device, model.checkpoint, ctx.run_dir, comm.get());
+    const auto summary =
+        th::eval::evaluate(ctx.config, ctx.device, model.checkpoint, ctx.run_dir, comm.get());
     if (!role.lead) return 0;
     std::cout << th::eval::markdown_table({summary});
     // The page beside the outputs; with the training curve when the checkpoint lies in a
@@ -47,7 +49,8 @@ int main(int argc, char** argv) {
     th::report::PageSources page;
     page.title = "TransHuman evaluation: " + summary.setting;
     page.evals = {ctx.run_dir};
-    const auto metrics = std::filesystem::path(model.checkpoint).parent_path().parent_path() / "metrics.jsonl";
+    const auto metrics =
+        std::filesystem::path(model.checkpoint).parent_path().parent_path() / "metrics.jsonl";
     if (std::filesystem::exists(metrics)) page.metrics = metrics;
     std::cout << "report: " << th::report::write_page(page, ctx.run_dir).string() << "\n";
     return 0;

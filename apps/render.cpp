@@ -12,10 +12,11 @@
 
 int main(int argc, char** argv) {
   return th::app::guarded_main(th::app::rank_app_name("transhuman-render"), [&]() -> int {
-    CLI::App cli{"Render free-viewpoint video of a person with a trained TransHuman checkpoint.\n"
-                 "Cameras: the orbit of METHOD 7 (default, 36 views), a camera path file (--path) or\n"
-                 "one dataset camera (--camera). Writes frames/*.png, video.mp4 (30 fps),\n"
-                 "cameras.yaml and contact_sheet.png into --out; rerunning resumes."};
+    CLI::App cli{
+        "Render free-viewpoint video of a person with a trained TransHuman checkpoint.\n"
+        "Cameras: the orbit of METHOD 7 (default, 36 views), a camera path file (--path) or\n"
+        "one dataset camera (--camera). Writes frames/*.png, video.mp4 (30 fps),\n"
+        "cameras.yaml and contact_sheet.png into --out; rerunning resumes."};
     th::app::CommonOptions options;
     th::inference::VideoRequest request;
     th::app::ModelOptions model;
@@ -25,24 +26,29 @@ int main(int argc, char** argv) {
     th::app::add_model_options(cli, model);
     th::app::add_precision_option(cli, options);
     cli.add_option("--human", request.human, "person (folder name); default: the setting's first");
-    cli.add_option("--frames", frames, "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
-    auto* orbit = cli.add_option("--orbit", request.orbit_views, "orbit with N views (default 36, or one per frame of a range)")
+    cli.add_option("--frames", frames,
+                   "body frame(s): F, BEGIN:END or BEGIN:END:STEP (default: the setting's first)");
+    auto* orbit = cli.add_option("--orbit", request.orbit_views,
+                                 "orbit with N views (default 36, or one per frame of a range)")
                       ->check(th::app::at_least(1));
-    auto* path = cli.add_option("--path", request.path_file, "camera path file (YAML/JSON, see README)");
+    auto* path =
+        cli.add_option("--path", request.path_file, "camera path file (YAML/JSON, see README)");
     auto* camera = cli.add_option("--camera", request.camera, "render from this dataset camera");
     orbit->excludes(path)->excludes(camera);
     path->excludes(camera);
-    cli.add_option("--view", request.view, "camera whose intrinsics and image size the orbit uses (METHOD 7: 3)")
+    cli.add_option("--view", request.view,
+                   "camera whose intrinsics and image size the orbit uses (METHOD 7: 3)")
         ->check(th::app::at_least(0));
     cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)")
         ->check(th::app::at_least(1));
     cli.add_option("--height", request.height, "output height")->check(th::app::at_least(1));
-    th::app::add_force_option(cli, options,
-                              "replace what --out holds: frames of an earlier, different request, or another "
-                              "command's outputs");
+    th::app::add_force_option(
+        cli, options,
+        "replace what --out holds: frames of an earlier, different request, or another "
+        "command's outputs");
     th::app::add_nproc_option(cli, nproc, "split the frames");
-    options.own_outputs = {"config.yaml", "log.txt", "frames", "request.yaml", "cameras.yaml", "video.mp4",
-                           "contact_sheet.png"};
+    options.own_outputs = {"config.yaml",  "log.txt",   "frames",           "request.yaml",
+                           "cameras.yaml", "video.mp4", "contact_sheet.png"};
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
     request.force = options.force;
@@ -51,17 +57,20 @@ int main(int argc, char** argv) {
     if (*path) request.cameras = th::inference::VideoRequest::Cameras::PathFile;
     if (*camera) request.cameras = th::inference::VideoRequest::Cameras::Dataset;
 
-    if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-render", "runs/render"))
+    if (const auto code =
+            th::app::launch_ranks(nproc, options, argc, argv, "transhuman-render", "runs/render"))
       return *code;
     const auto role = th::app::rank_role(options);
-    const auto ctx = th::app::start_run(options, "transhuman-render", role.lead ? "runs/render" : "");
+    const auto ctx =
+        th::app::start_run(options, "transhuman-render", role.lead ? "runs/render" : "");
     th::app::share_cores(role, ctx);
     if (role.lead) th::app::print_summary(ctx, options.dry_run, model.checkpoint);
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     if (options.dry_run) {  // the request too: person, frames, cameras, path file, memory
       const auto plan = th::inference::plan_video(session, request);
-      spdlog::info("dry run: a video of {} frames of {} ({} body frame{}), {}x{}", plan.count, plan.human_name,
-                   plan.frames.size(), plan.frames.size() > 1 ? "s" : "", plan.width, plan.height);
+      spdlog::info("dry run: a video of {} frames of {} ({} body frame{}), {}x{}", plan.count,
+                   plan.human_name, plan.frames.size(), plan.frames.size() > 1 ? "s" : "",
+                   plan.width, plan.height);
       return 0;
     }
     const auto comm = th::app::join_ranks(role, ctx);
@@ -69,8 +78,10 @@ int main(int argc, char** argv) {
     if (!role.lead) return 0;
     spdlog::info("{} frames ({} rendered, {} resumed), {:.2f} s/frame, in {}", s.frames, s.rendered,
                  s.skipped, s.seconds_per_frame, s.frames_dir.string());
-    if (s.video_written) spdlog::info("{}", s.video_message);
-    else spdlog::warn("{}", s.video_message);
+    if (s.video_written)
+      spdlog::info("{}", s.video_message);
+    else
+      spdlog::warn("{}", s.video_message);
     if (!s.contact_sheet.empty()) spdlog::info("contact sheet: {}", s.contact_sheet.string());
     return 0;
   });

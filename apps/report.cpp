@@ -1,5 +1,7 @@
 // transhuman-report: the HTML report page of the demo (scores, training curve, orbit, mesh
 // viewer, gallery) or of an ablation run (rows side by side). transhuman-eval writes its own.
+#include "report/report.hpp"
+
 #include <fcntl.h>
 #include <spdlog/spdlog.h>
 #include <sys/file.h>
@@ -11,7 +13,6 @@
 
 #include "app/app.hpp"
 #include "core/error.hpp"
-#include "report/report.hpp"
 
 namespace fs = std::filesystem;
 
@@ -72,19 +73,26 @@ int main(int argc, char** argv) {
     std::vector<std::string> evals, links;
     std::string metrics, orbit, mesh;
     page->add_option("--out", out, "the report folder (index.html and what it shows)")->required();
-    page->add_option("--eval", evals, "transhuman-eval output folder(s)")->required()->check(CLI::ExistingDirectory);
+    page->add_option("--eval", evals, "transhuman-eval output folder(s)")
+        ->required()
+        ->check(CLI::ExistingDirectory);
     page->add_option("--metrics", metrics, "a training run's metrics.jsonl (training curve)");
-    page->add_option("--orbit", orbit, "transhuman-render's output folder (frames/, video.mp4)")->check(CLI::ExistingDirectory);
+    page->add_option("--orbit", orbit, "transhuman-render's output folder (frames/, video.mp4)")
+        ->check(CLI::ExistingDirectory);
     page->add_option("--mesh", mesh, "a .ply from transhuman-mesh")->check(CLI::ExistingFile);
-    page->add_option("--link", links, "LABEL=HREF: a link in the page's header (relative to the page)");
+    page->add_option("--link", links,
+                     "LABEL=HREF: a link in the page's header (relative to the page)");
     page->add_option("--title", title, "the page's title");
 
-    auto* ablations = cli.add_subcommand("ablations", "an ablation run: rows side by side, paired against full");
+    auto* ablations =
+        cli.add_subcommand("ablations", "an ablation run: rows side by side, paired against full");
     std::string root = "runs/ablations", setting = "identity", configs = "configs/ablations";
     std::vector<std::string> rows;
-    ablations->add_option("--root", root, "scripts/run_ablations.sh's output folder (ROOT/<row>/eval_<setting>)");
+    ablations->add_option("--root", root,
+                          "scripts/run_ablations.sh's output folder (ROOT/<row>/eval_<setting>)");
     ablations->add_option("--setting", setting, "the evaluation setting");
-    ablations->add_option("--configs", configs, "the folder of the rows' configs (for their descriptions)");
+    ablations->add_option("--configs", configs,
+                          "the folder of the rows' configs (for their descriptions)");
     ablations->add_option("--title", title, "the page's title");
     ablations->add_option("rows", rows, "row names")->required();
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
@@ -108,12 +116,13 @@ int main(int argc, char** argv) {
       std::vector<th::report::AblationRow> list;
       for (const auto& row : rows) {
         const fs::path run = fs::path(root) / row;
-        list.push_back({row, describe(fs::path(configs) / (row + ".yaml")), run / ("eval_" + setting),
-                        train_seconds(run / "train_done")});
+        list.push_back({row, describe(fs::path(configs) / (row + ".yaml")),
+                        run / ("eval_" + setting), train_seconds(run / "train_done")});
       }
       for (const auto& row : list) refuse_folder_in_use(row.eval, "evaluation folder");
       lock_report_folder(root);
-      written = th::report::write_ablation_page(list, title.empty() ? "TransHuman ablations (" + setting + ")" : title, root);
+      written = th::report::write_ablation_page(
+          list, title.empty() ? "TransHuman ablations (" + setting + ")" : title, root);
     }
     std::cout << "report: " << written.string() << "\n";
     return 0;

@@ -18,14 +18,16 @@
 
 int main(int argc, char** argv) {
   return th::app::guarded_main("transhuman-synth", [&] {
-    CLI::App cli{"Writes a synthetic multi-view human dataset in ZJU-MoCap's or EasyMocap's layout."};
+    CLI::App cli{
+        "Writes a synthetic multi-view human dataset in ZJU-MoCap's or EasyMocap's layout."};
     std::string out, config_file = "configs/synth/default.yaml", layout;
     std::vector<std::string> overrides;
     bool force = false, verbose = false;
     cli.add_option("-o,--out", out, "dataset folder to write")->required();
     cli.add_option("-c,--config", config_file, "YAML config (may name a parent config)")
         ->capture_default_str();
-    cli.add_option("--layout", layout, "zju_mocap (annots.npy) or easymocap (intri.yml, extri.yml, output/smpl); "
+    cli.add_option("--layout", layout,
+                   "zju_mocap (annots.npy) or easymocap (intri.yml, extri.yml, output/smpl); "
                    "default: the config's `layout`")
         ->check(CLI::IsMember({"zju_mocap", "easymocap"}));
     cli.add_flag("--force", force, "replace an existing dataset made with another config");

@@ -21,24 +21,33 @@ int main(int argc, char** argv) {
     th::app::add_force_option(cli, options);
     th::app::add_precision_option(cli, options);
     cli.add_flag("--resume", resume, "continue the run in --out from its latest checkpoint");
-    cli.add_option("--max-steps", max_steps, "stop after this many steps in all (with a checkpoint)")
+    cli.add_option("--max-steps", max_steps,
+                   "stop after this many steps in all (with a checkpoint)")
         ->check(th::app::at_least(0));
-    cli.add_option("--init", init_from,
-                   "fine-tune: start from this checkpoint's weights (ours .pt or the reference's .pth), "
-                   "with a fresh optimiser and schedule");
+    cli.add_option(
+        "--init", init_from,
+        "fine-tune: start from this checkpoint's weights (ours .pt or the reference's .pth), "
+        "with a fresh optimiser and schedule");
     th::app::add_nproc_option(cli, nproc, "data-parallel training");
-    cli.add_option("--rank-state", rank_state_dir, "every rank writes its final state to DIR/rank<r>.pt")
+    cli.add_option("--rank-state", rank_state_dir,
+                   "every rank writes its final state to DIR/rank<r>.pt")
         ->group("");  // for tests
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
-    if (resume && options.out.empty()) th::fail("--resume needs --out (the run directory to continue)");
-    if (resume && options.force) th::fail("--resume continues the run in --out, --force replaces it: not both");
+    if (resume && options.out.empty())
+      th::fail("--resume needs --out (the run directory to continue)");
+    if (resume && options.force)
+      th::fail("--resume continues the run in --out, --force replaces it: not both");
     if (resume && !init_from.empty())
-      th::fail("--resume continues the run in --out from its own checkpoint, --init starts one from another: not both");
-    if (!init_from.empty()) options.inputs.push_back({"the starting checkpoint (--init)", init_from});
+      th::fail(
+          "--resume continues the run in --out from its own checkpoint, --init starts one from "
+          "another: not both");
+    if (!init_from.empty())
+      options.inputs.push_back({"the starting checkpoint (--init)", init_from});
     options.resume = resume;
     options.training = true;
 
-    if (const auto code = th::app::launch_ranks(nproc, options, argc, argv, "transhuman-train", "runs/train"))
+    if (const auto code =
+            th::app::launch_ranks(nproc, options, argc, argv, "transhuman-train", "runs/train"))
       return *code;
 
     const auto role = th::app::rank_role(options);

@@ -1,9 +1,8 @@
 // transhuman-view: an interactive novel-view viewer (lib/viewer/server.hpp says what it serves).
 // Loads the model and the data once and serves a page (127.0.0.1 by default) where the camera is
 // dragged with the mouse and the person re-renders from there.
-#include <spdlog/spdlog.h>
-
 #include <poll.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -46,8 +45,9 @@ void stop_on_signals() {
     server->stop();
     pollfd again{g_signal_pipe[0], POLLIN, 0};
     if (::poll(&again, 1, 1500) > 0 || g_server.load()) {
-      const auto ms =
-          std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - start).count();
+      const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                          std::chrono::steady_clock::now() - start)
+                          .count();
       spdlog::warn("viewer: still stopping {} ms after the signal; ending now", ms);
       std::fflush(nullptr);
       std::_Exit(0);
@@ -64,8 +64,9 @@ void stop_on_signals() {
 int main(int argc, char** argv) {
   stop_on_signals();
   return th::app::guarded_main("transhuman-view", [&]() -> int {
-    CLI::App cli{"Interactive novel-view viewer: serves a page where the camera is dragged with the mouse\n"
-                 "and the person re-renders from there (open the printed URL in a browser)."};
+    CLI::App cli{
+        "Interactive novel-view viewer: serves a page where the camera is dragged with the mouse\n"
+        "and the person re-renders from there (open the printed URL in a browser)."};
     th::app::CommonOptions options;
     th::app::ModelOptions model;
     th::viewer::Options o;
@@ -73,19 +74,25 @@ int main(int argc, char** argv) {
     th::app::add_common_options(cli, options);
     th::app::add_model_options(cli, model);
     th::app::add_precision_option(cli, options);
-    cli.add_option("--human", human, "the person shown first (folder name); default: the setting's first");
-    cli.add_option("--frame", o.start_frame, "the body frame shown first (annots index); default: the person's first test frame")
+    cli.add_option("--human", human,
+                   "the person shown first (folder name); default: the setting's first");
+    cli.add_option(
+           "--frame", o.start_frame,
+           "the body frame shown first (annots index); default: the person's first test frame")
         ->check(th::app::at_least(0));
-    cli.add_option("--host", o.host,
-                   "address to listen on (default 127.0.0.1: this machine only; '' or 0.0.0.0: every IPv4 "
-                   "interface, '::': every interface)");
+    cli.add_option(
+        "--host", o.host,
+        "address to listen on (default 127.0.0.1: this machine only; '' or 0.0.0.0: every IPv4 "
+        "interface, '::': every interface)");
     cli.add_option("--port", o.port, "port (refused when another program listens on it)")
         ->check(th::app::in_range(1, 65535));
-    cli.add_option("--allow-host", o.allow_hosts,
-                   "a name the browser may reach the viewer by, beside 127.0.0.1, localhost, [::1] and the "
-                   "--host address (requests naming another Host are refused); repeatable")
+    cli.add_option(
+           "--allow-host", o.allow_hosts,
+           "a name the browser may reach the viewer by, beside 127.0.0.1, localhost, [::1] and the "
+           "--host address (requests naming another Host are refused); repeatable")
         ->allow_extra_args(false);
-    cli.add_option("--render-timeout", o.render_timeout_s, "longest one render may run, seconds (then 503)")
+    cli.add_option("--render-timeout", o.render_timeout_s,
+                   "longest one render may run, seconds (then 503)")
         ->check(th::app::in_range(1, 3600));
     cli.add_option("--view", o.view, "camera whose image size the first view takes (METHOD 7: 3)")
         ->check(th::app::at_least(0));
@@ -98,18 +105,20 @@ int main(int argc, char** argv) {
     const auto ctx = th::app::start_run(options, "transhuman-view");
     const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
     if (o.view >= session.human(0).num_cameras())
-      th::fail("--view ", o.view, ": ", session.human(0).name(), " has ", session.human(0).num_cameras(), " cameras");
+      th::fail("--view ", o.view, ": ", session.human(0).name(), " has ",
+               session.human(0).num_cameras(), " cameras");
     o.start_human = session.find_human(human);
     const auto& first = session.human(o.start_human);
     if (o.start_frame >= first.num_frames())
-      th::fail("--frame ", o.start_frame, ": ", first.name(), " has ", first.num_frames(), " frames");
+      th::fail("--frame ", o.start_frame, ": ", first.name(), " has ", first.num_frames(),
+               " frames");
     if (options.dry_run) return 0;
 
     th::viewer::Server server(session, o);
     g_server = &server;
     std::cout << "transhuman-view: open " << server.url() << " in a browser (Ctrl-C stops)\n"
-              << "transhuman-view: listening on " << server.interfaces() << "; answering to " << server.host_names()
-              << std::endl;
+              << "transhuman-view: listening on " << server.interfaces() << "; answering to "
+              << server.host_names() << std::endl;
     server.run();
     g_server = nullptr;
     return 0;

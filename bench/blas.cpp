@@ -2,9 +2,9 @@
 // its own OpenMP threads. Used to choose between OpenBLAS's pthread and OpenMP flavours.
 //   transhuman-bench-blas [--threads N] [--out FILE]
 #include <ATen/Parallel.h>
-#include <CLI/CLI.hpp>
 #include <torch/torch.h>
 
+#include <CLI/CLI.hpp>
 #include <chrono>
 #include <fstream>
 #include <iostream>

@@ -3,19 +3,18 @@
 // Memory: peak bytes of live LibTorch CPU tensors (c10's memory-reporting hook) and the resident
 // set growth (Linux VmHWM after resetting it through /proc/self/clear_refs).
 
-#include <torch/torch.h>
-
 #include <c10/core/Allocator.h>
 #include <c10/util/ThreadLocalDebugInfo.h>
+#include <torch/torch.h>
 
 #include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
+#include <iostream>
 #include <memory>
 #include <sstream>
-#include <iostream>
 #include <string>
 
 #include "core/error.hpp"
@@ -31,7 +30,9 @@ inline std::string fmt(double v, int prec = 1) {
   return s.str();
 }
 
-inline double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+inline double seconds_since(Clock::time_point t) {
+  return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 inline int64_t status_kb(const char* key) {
   std::ifstream f("/proc/self/status");
@@ -46,8 +47,8 @@ inline int64_t status_kb(const char* key) {
 // MemoryReportingInfoBase while one is installed).
 struct TensorMemoryHook : c10::MemoryReportingInfoBase {
   int64_t base = -1, peak = 0;
-  void reportMemoryUsage(void*, int64_t size, th::compat::MemoryTotal total, th::compat::MemoryTotal,
-                         c10::Device device) override {
+  void reportMemoryUsage(void*, int64_t size, th::compat::MemoryTotal total,
+                         th::compat::MemoryTotal, c10::Device device) override {
     if (!device.is_cpu()) return;
     const auto total_allocated = static_cast<int64_t>(total);
     if (base < 0) base = total_allocated - size;
@@ -69,7 +70,9 @@ struct PeakMemory {
   }
   double tensor_mib() const { return hook->peak / 1048576.0; }
   double rss_mib() const { return (status_kb("VmHWM:") - base_kb) / 1024.0; }
-  std::string text() const { return fmt(tensor_mib(), 0) + " MiB tensors (RSS +" + fmt(rss_mib(), 0) + " MiB)"; }
+  std::string text() const {
+    return fmt(tensor_mib(), 0) + " MiB tensors (RSS +" + fmt(rss_mib(), 0) + " MiB)";
+  }
 };
 
 // A benchmark that writes its figures over `out` (not appending) refuses an existing file unless
@@ -77,7 +80,8 @@ struct PeakMemory {
 // anything is measured. Throws th::Error.
 inline void refuse_overwriting(const std::filesystem::path& out, bool force) {
   std::error_code ec;
-  if (out.empty() || force || !std::filesystem::exists(std::filesystem::symlink_status(out, ec))) return;
+  if (out.empty() || force || !std::filesystem::exists(std::filesystem::symlink_status(out, ec)))
+    return;
   th::fail("--out '", out.string(), "' exists: --force to replace it, or --out another file");
 }
 
@@ -102,7 +106,9 @@ inline std::string load_average() {
 // "unknown" outside a git checkout.
 inline std::string git_commit() {
   std::string out;
-  if (FILE* f = popen("git rev-parse --short HEAD 2>/dev/null && git status --porcelain -uno 2>/dev/null | head -1", "r")) {
+  if (FILE* f = popen("git rev-parse --short HEAD 2>/dev/null && git status --porcelain -uno "
+                      "2>/dev/null | head -1",
+                      "r")) {
     char buf[256];
     while (fgets(buf, sizeof buf, f)) out += buf;
     pclose(f);

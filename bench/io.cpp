@@ -2,9 +2,9 @@
 // float64, 34 MB) against copying the same bytes once. The reader moves array data straight
 // into the tensor, so the two should be close; tests/io checks what it reads, this how fast.
 //   transhuman-bench-io [--runs N] [--out FILE]
-#include <CLI/CLI.hpp>
 #include <torch/torch.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <fstream>
@@ -22,7 +22,8 @@ double best_seconds(int runs, F&& f) {
   for (int run = 0; run < runs; ++run) {
     const auto t0 = std::chrono::steady_clock::now();
     f();
-    best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    best = std::min(best,
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   return best;
 }
@@ -41,10 +42,11 @@ int run(int argc, char** argv) {
   const auto posedirs = torch::arange(6890 * 3 * 207, torch::kDouble).reshape({6890, 3, 207});
   std::ostringstream report;
   for (int protocol : {2, 4}) {
-    const std::string bytes =
-        th::io::pickle_bytes(Value::dict({{Value::str("posedirs"), Value::array(posedirs)}}), protocol);
+    const std::string bytes = th::io::pickle_bytes(
+        Value::dict({{Value::str("posedirs"), Value::array(posedirs)}}), protocol);
     Value parsed;
-    const double parse = best_seconds(runs, [&] { parsed = th::io::parse_pickle(bytes, "posedirs.pkl"); });
+    const double parse =
+        best_seconds(runs, [&] { parsed = th::io::parse_pickle(bytes, "posedirs.pkl"); });
     if (!torch::equal(parsed["posedirs"].as_tensor(), posedirs)) {
       std::cerr << "transhuman-bench-io: error: the parsed array differs from the written one\n";
       return 1;
@@ -55,9 +57,10 @@ int run(int argc, char** argv) {
       if (c.size() != bytes.size()) std::abort();
     });
     char line[200];
-    std::snprintf(line, sizeof line,
-                  "pickle protocol %d, %.1f MB: parse %.2f ms, one copy %.2f ms (%.2fx), best of %d\n",
-                  protocol, bytes.size() / 1e6, parse * 1e3, copy * 1e3, parse / copy, runs);
+    std::snprintf(
+        line, sizeof line,
+        "pickle protocol %d, %.1f MB: parse %.2f ms, one copy %.2f ms (%.2fx), best of %d\n",
+        protocol, bytes.size() / 1e6, parse * 1e3, copy * 1e3, parse / copy, runs);
     report << line;
   }
   std::cout << report.str();

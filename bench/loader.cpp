@@ -1,9 +1,9 @@
 // Training-loader throughput: samples per second of data::Dataset + Prefetcher on the dataset a
 // config names (by default the synthetic data), with 0 (synchronous), 1 and 2 worker threads.
 //   transhuman-bench-loader [--config FILE] [--samples N] [--out FILE] [overrides...]
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include <CLI/CLI.hpp>
 #include <chrono>
 #include <fstream>
 #include <iostream>
@@ -41,14 +41,16 @@ int main(int argc, char** argv) {
     report << "Training loader, " << data.root << " (" << data.train_setting << ", ratio "
            << data.ratio << ", reference images " << first.ref_images.sizes() << ", "
            << first.ray_o.size(0) << " rays/sample), " << samples << " samples:\n";
-    for (size_t i = 0; i < std::min<size_t>(order.size(), 8); ++i) dataset->load(order[i], 0);  // warm the file cache
+    for (size_t i = 0; i < std::min<size_t>(order.size(), 8); ++i)
+      dataset->load(order[i], 0);  // warm the file cache
     for (int workers : {0, 1, 2}) {
       th::data::Prefetcher prefetcher(dataset, order, seeds, workers, 8);
       const auto t0 = std::chrono::steady_clock::now();
       while (!prefetcher.done()) prefetcher.next();
       const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       char line[128];
-      std::snprintf(line, sizeof line, "  %d worker thread(s): %6.2f samples/s\n", workers, samples / s);
+      std::snprintf(line, sizeof line, "  %d worker thread(s): %6.2f samples/s\n", workers,
+                    samples / s);
       report << line;
     }
     std::cout << report.str();

@@ -1,8 +1,7 @@
 #include "app/app.hpp"
 
-#include <spdlog/spdlog.h>
-
 #include <fcntl.h>
+#include <spdlog/spdlog.h>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -37,9 +36,10 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
 }
 
 void add_precision_option(CLI::App& cli, CommonOptions& o) {
-  cli.add_option("--precision", o.precision,
-                 "matrix products in fp32, bf16, or auto: bf16 where the CPU has native bf16 dot products "
-                 "(overrides the config's 'precision')")
+  cli.add_option(
+         "--precision", o.precision,
+         "matrix products in fp32, bf16, or auto: bf16 where the CPU has native bf16 dot products "
+         "(overrides the config's 'precision')")
       ->check(CLI::IsMember({"fp32", "bf16", "auto"}));
 }
 
@@ -69,11 +69,13 @@ CLI::Validator at_least(double min) {
   return number_check([min](double v) { return v >= min; }, ">= " + CLI::detail::to_string(min));
 }
 CLI::Validator in_range(double min, double max) {
-  return number_check([min, max](double v) { return v >= min && v <= max; },
-                      "in [" + CLI::detail::to_string(min) + ", " + CLI::detail::to_string(max) + "]");
+  return number_check(
+      [min, max](double v) { return v >= min && v <= max; },
+      "in [" + CLI::detail::to_string(min) + ", " + CLI::detail::to_string(max) + "]");
 }
 CLI::Validator above(double bound) {
-  return number_check([bound](double v) { return v > bound; }, "> " + CLI::detail::to_string(bound));
+  return number_check([bound](double v) { return v > bound; },
+                      "> " + CLI::detail::to_string(bound));
 }
 
 void add_force_option(CLI::App& cli, CommonOptions& o, const std::string& help) {
@@ -101,10 +103,12 @@ void refuse_clearing_inputs(const fs::path& dir, const Inputs& inputs) {
     if (path.empty() || !(fs::exists(path, ec) || fs::is_symlink(path, ec))) continue;
     // As given too: an input reached through a link inside --out would lose the link.
     if (path_within(path, dir) || path_within_as_given(path, dir))
-      fail("--force would delete ", what, " '", path, "', an input of this command, which lies in --out '",
-           dir.string(), "': choose another --out (nothing was removed)");
+      fail("--force would delete ", what, " '", path,
+           "', an input of this command, which lies in --out '", dir.string(),
+           "': choose another --out (nothing was removed)");
     if (path_within(dir, path) || path_within_as_given(dir, path))
-      fail("--force would delete part of ", what, " '", path, "', an input of this command: --out '", dir.string(),
+      fail("--force would delete part of ", what, " '", path,
+           "', an input of this command: --out '", dir.string(),
            "' lies inside it (nothing was removed)");
   }
 }
@@ -119,14 +123,16 @@ Inputs config_inputs(const Config& c, const std::string& config_file) {
             {"the visibility files (data.visibility_root)", c.data.visibility_root},
             {"the encoder weights (model.encoder.pretrained)", c.model.encoder.pretrained},
             {"the k-means file (model.grouping.kmeans_file)",
-             c.model.grouping.kmeans_file == kKMeansCompute ? std::string() : c.model.grouping.kmeans_file},
+             c.model.grouping.kmeans_file == kKMeansCompute ? std::string()
+                                                            : c.model.grouping.kmeans_file},
             {"the LPIPS weights (train.lpips_weights)", c.train.lpips_weights},
             {"the LPIPS weights (eval.lpips_weights)", c.eval.lpips_weights}};
   return in;
 }
 
-void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume, const Inputs& inputs,
-                   const std::vector<std::string>& own_outputs, bool check_only) {
+void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, bool resume,
+                   const Inputs& inputs, const std::vector<std::string>& own_outputs,
+                   bool check_only) {
   std::error_code ec;
   if (!fs::exists(dir, ec)) return;
   if (!fs::is_directory(dir, ec)) fail("--out '", dir.string(), "' is a file, not a folder");
@@ -146,26 +152,33 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
   // into as it is: a link there would take the command's writes elsewhere.
   const bool continued = resume || (!own_outputs.empty() && foreign.empty() && !force);
   if (continued && !links.empty())
-    fail("--out '", dir.string(), "' holds '", links.front(), "', a symbolic link this command did not make: ",
-         "its outputs are written into the folder itself (remove the link, or --force to replace the contents)");
+    fail("--out '", dir.string(), "' holds '", links.front(),
+         "', a symbolic link this command did not make: ",
+         "its outputs are written into the folder itself (remove the link, or --force to replace "
+         "the contents)");
   if (resume) {
     const fs::path previous = dir / "config.yaml";
-    if (!fs::exists(previous)) fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
+    if (!fs::exists(previous))
+      fail("cannot resume in '", dir.string(), "': it holds no config.yaml");
     YAML::Node stored;
     try {
       stored = YAML::LoadFile(previous.string());
     } catch (const YAML::Exception& e) {
-      fail("cannot resume in '", dir.string(), "': its config.yaml cannot be read (", e.what(), ")");
+      fail("cannot resume in '", dir.string(), "': its config.yaml cannot be read (", e.what(),
+           ")");
     }
-    if (!stored.IsMap()) fail("cannot resume in '", dir.string(), "': its config.yaml is not a map of keys");
+    if (!stored.IsMap())
+      fail("cannot resume in '", dir.string(), "': its config.yaml is not a map of keys");
     // The model, and what makes the run's samples what they were (seed, data).
     auto before = config::leaves(stored["model"], "model");
     auto now = config::leaves(resolved["model"], "model");
-    for (const char* key : {"seed", "data.dataset", "data.root", "data.split_file", "data.train_setting"}) {
+    for (const char* key :
+         {"seed", "data.dataset", "data.root", "data.split_file", "data.train_setting"}) {
       const std::string k(key);
       const size_t dot = k.find('.');
       auto leaf = [&](const YAML::Node& root) {
-        const YAML::Node n = dot == std::string::npos ? root[k] : root[k.substr(0, dot)][k.substr(dot + 1)];
+        const YAML::Node n =
+            dot == std::string::npos ? root[k] : root[k.substr(0, dot)][k.substr(dot + 1)];
         return n && n.IsScalar() ? n.Scalar() : std::string("absent");
       };
       before[k] = leaf(stored);
@@ -175,11 +188,13 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
     for (const auto& [key, value] : now) {
       const auto it = before.find(key);
       if (it == before.end() || it->second != value)
-        changed += (changed.empty() ? "" : ", ") + key + " (run: " + (it == before.end() ? "absent" : it->second) +
-                   ", now: " + value + ")";
+        changed += (changed.empty() ? "" : ", ") + key +
+                   " (run: " + (it == before.end() ? "absent" : it->second) + ", now: " + value +
+                   ")";
     }
     if (!changed.empty())
-      fail("cannot resume the run in '", dir.string(), "' with other model, seed or data settings: ", changed,
+      fail("cannot resume the run in '", dir.string(),
+           "' with other model, seed or data settings: ", changed,
            " (start a new run in another folder, or --force to replace this one)");
     return;
   }
@@ -190,10 +205,12 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
     std::string some;
     const size_t n = listed.size();
     for (size_t i = 0; i < std::min<size_t>(n, 3); ++i) some += (i ? ", " : "") + listed[i];
-    fail("--out '", dir.string(), "' already holds ", n, " entr", n == 1 ? "y" : "ies", " (", some, n > 3 ? ", ..." : "",
-         ")", own_outputs.empty() ? "" : " that this command does not write",
+    fail("--out '", dir.string(), "' already holds ", n, " entr", n == 1 ? "y" : "ies", " (", some,
+         n > 3 ? ", ..." : "", ")", own_outputs.empty() ? "" : " that this command does not write",
          ": choose another folder, --force to replace its contents",
-         fs::exists(dir / "checkpoints") && own_outputs.empty() ? ", or --resume to continue the run" : "");
+         fs::exists(dir / "checkpoints") && own_outputs.empty()
+             ? ", or --resume to continue the run"
+             : "");
   }
   refuse_clearing_inputs(dir, inputs);
   if (check_only) return;
@@ -208,14 +225,17 @@ int lock_run_dir(const fs::path& dir, const std::string& app_name) {
   // file of somewhere else) or anything but a regular file by fstat, before a byte is written.
   const int fd = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK, 0644);
   if (fd < 0 && errno == ELOOP)
-    fail("the run folder's lock file '", file.string(), "' is a symbolic link: remove it (nothing was written)");
-  if (fd < 0) fail("cannot open the run folder's lock file '", file.string(), "': ", std::strerror(errno));
+    fail("the run folder's lock file '", file.string(),
+         "' is a symbolic link: remove it (nothing was written)");
+  if (fd < 0)
+    fail("cannot open the run folder's lock file '", file.string(), "': ", std::strerror(errno));
   struct stat st {};
   if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || st.st_nlink != 1) {
     const bool linked = S_ISREG(st.st_mode) && st.st_nlink > 1;
     ::close(fd);
     fail("the run folder's lock file '", file.string(), "' is ",
-         linked ? "a hard link to another file" : "not a regular file", ": remove it (nothing was written)");
+         linked ? "a hard link to another file" : "not a regular file",
+         ": remove it (nothing was written)");
   }
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
@@ -223,7 +243,8 @@ int lock_run_dir(const fs::path& dir, const std::string& app_name) {
     std::getline(std::ifstream(file), holder);
     ::close(fd);
     if (err == EWOULDBLOCK)
-      fail("run folder '", dir.string(), "' is in use by ", holder.empty() ? "another process" : holder,
+      fail("run folder '", dir.string(), "' is in use by ",
+           holder.empty() ? "another process" : holder,
            ": one writer at a time (wait for it to end, or choose another --out)");
     fail("cannot lock the run folder '", dir.string(), "': ", std::strerror(err));
   }
@@ -240,11 +261,13 @@ int lock_run_dir(const fs::path& dir, const std::string& app_name) {
 
 void add_model_options(CLI::App& cli, ModelOptions& m) {
   cli.add_option("--checkpoint", m.checkpoint, "checkpoint: ours (.pt) or the reference's (.pth)");
-  cli.add_option("--setting", m.setting,
-                 "split setting (pose, identity, one_shot, cross_dataset, fitting); default eval.setting");
-  cli.add_option("--reference-views", m.reference_views,
-                 "reference cameras, comma-separated names or calibration indices (data.reference_views); "
-                 "default: the split's, or without a split the most evenly spread");
+  cli.add_option(
+      "--setting", m.setting,
+      "split setting (pose, identity, one_shot, cross_dataset, fitting); default eval.setting");
+  cli.add_option(
+      "--reference-views", m.reference_views,
+      "reference cameras, comma-separated names or calibration indices (data.reference_views); "
+      "default: the split's, or without a split the most evenly spread");
 }
 
 void apply_model_options(const ModelOptions& m, CommonOptions& options) {
@@ -254,9 +277,11 @@ void apply_model_options(const ModelOptions& m, CommonOptions& options) {
     std::string list;
     std::stringstream in(m.reference_views);
     for (std::string item; std::getline(in, item, ',');) {
-      if (item.empty()) fail("--reference-views '", m.reference_views, "': an empty camera name (see --help)");
+      if (item.empty())
+        fail("--reference-views '", m.reference_views, "': an empty camera name (see --help)");
       std::string quoted = "\"";
-      for (const char c : item) quoted += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
+      for (const char c : item)
+        quoted += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
       list += (list.empty() ? "" : ", ") + quoted + "\"";
     }
     options.overrides.push_back("data.reference_views=[" + list + "]");
@@ -279,22 +304,26 @@ void require_weight_files(Config& c, bool training, bool scoring) {
          "` (docs/USAGE.md, \"Real data\"), or set ", key, ": \"\" (", off, ")");
   };
   const std::string lpips =
-      "python3 scripts/export_lpips.py --vgg vgg16-397923af.pth --lin <lpips repository>/lpips/weights/v0.1/vgg.pth";
+      "python3 scripts/export_lpips.py --vgg vgg16-397923af.pth --lin <lpips "
+      "repository>/lpips/weights/v0.1/vgg.pth";
   if (training) {
     require("model.encoder.pretrained", c.model.encoder.pretrained,
-            "python3 scripts/export_pretrained.py --torchvision", "the encoder then starts from random weights");
+            "python3 scripts/export_pretrained.py --torchvision",
+            "the encoder then starts from random weights");
     if (c.train.lpips_weight > 0)
-      require("train.lpips_weights", c.train.lpips_weights, lpips, "the perceptual loss term is then off");
+      require("train.lpips_weights", c.train.lpips_weights, lpips,
+              "the perceptual loss term is then off");
   } else if (!c.model.encoder.pretrained.empty()) {
     spdlog::debug("model.encoder.pretrained not read: the checkpoint holds the encoder's weights");
     c.model.encoder.pretrained.clear();
   }
-  if (scoring) require("eval.lpips_weights", c.eval.lpips_weights, lpips, "LPIPS is then not reported");
+  if (scoring)
+    require("eval.lpips_weights", c.eval.lpips_weights, lpips, "LPIPS is then not reported");
 }
 
 // The start's log lines.
-RunContext finish_start(RunContext& ctx, const CommonOptions& o, const std::string& app_name, bool own_malloc,
-                        int threads) {
+RunContext finish_start(RunContext& ctx, const CommonOptions& o, const std::string& app_name,
+                        bool own_malloc, int threads) {
   spdlog::info("{} | config {} | {}", app_name, o.config,
                ctx.run_dir.empty() ? "no run directory" : "run directory " + ctx.run_dir.string());
   runtime::log_blas();
@@ -331,10 +360,12 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
   if (!out.empty()) {
     auto inputs = config_inputs(ctx.config, o.config);
     for (size_t i = 1; i < config_files.size(); ++i)
-      inputs.push_back({"the config's parent (" + config_files[i - 1].filename().string() + ")", config_files[i]});
+      inputs.push_back({"the config's parent (" + config_files[i - 1].filename().string() + ")",
+                        config_files[i]});
     inputs.insert(inputs.end(), o.inputs.begin(), o.inputs.end());
     if (o.dry_run) {  // a dry run writes nothing: the folder is checked as the run would check it
-      if (o.guard_out) claim_run_dir(out, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, true);
+      if (o.guard_out)
+        claim_run_dir(out, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, true);
       spdlog::info("dry run: --out '{}' is not touched", out);
       return finish_start(ctx, o, app_name, own_malloc, threads);
     }
@@ -343,7 +374,8 @@ RunContext start_run(const CommonOptions& o, const std::string& app_name,
     // under the lock, which a second writer cannot take, before --force clears the folder.
     auto claim = [&](bool check_only) {
       if (o.guard_out)
-        claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume, inputs, o.own_outputs, check_only);
+        claim_run_dir(ctx.run_dir, ctx.resolved, o.force, o.resume, inputs, o.own_outputs,
+                      check_only);
     };
     claim(true);
     if (o.preflight) o.preflight(ctx.config);
@@ -419,12 +451,15 @@ void decimal_numbers_only(CLI::App& cli) {
     } else if (base == "FLOAT") {
       opt->transform(CLI::Validator(
           [](std::string& text) -> std::string {
-            return text.find_first_of("xX") == std::string::npos ? "" : "'" + text + "' is not a decimal number";
+            return text.find_first_of("xX") == std::string::npos
+                       ? ""
+                       : "'" + text + "' is not a decimal number";
           },
           ""));
     }
   }
-  for (CLI::App* sub : cli.get_subcommands([](CLI::App*) { return true; })) decimal_numbers_only(*sub);
+  for (CLI::App* sub : cli.get_subcommands([](CLI::App*) { return true; }))
+    decimal_numbers_only(*sub);
 }
 
 }  // namespace

@@ -2,9 +2,9 @@
 // What every executable shares: common command-line options, config loading with overrides,
 // the run directory (resolved config + log), BLAS/device/thread set-up, and one-line errors.
 
-#include <CLI/CLI.hpp>
 #include <torch/types.h>
 
+#include <CLI/CLI.hpp>
 #include <filesystem>
 #include <functional>
 #include <optional>
@@ -24,7 +24,7 @@ struct CommonOptions {
   int threads = -1;                    // overrides config `threads` when >= 0
   bool dry_run = false;
   bool verbose = false;
-  bool quiet = false;                  // errors only on the console (data-parallel ranks other than 0)
+  bool quiet = false;  // errors only on the console (data-parallel ranks other than 0)
   // --out must be empty or new unless --force (replace its contents) or, for training, --resume
   // (continue the run there; the model section of its config.yaml must be unchanged).
   bool guard_out = false;
@@ -74,9 +74,9 @@ using Inputs = std::vector<std::pair<std::string, std::string>>;
 // `inputs` lies inside it and that it lies inside none of them) or `resume` (the model keys
 // of its config.yaml must equal `resolved`'s; those that differ are named). Throws th::Error.
 // With `check_only`, every check runs and nothing is removed.
-void claim_run_dir(const std::filesystem::path& dir, const YAML::Node& resolved, bool force, bool resume,
-                   const Inputs& inputs = {}, const std::vector<std::string>& own_outputs = {},
-                   bool check_only = false);
+void claim_run_dir(const std::filesystem::path& dir, const YAML::Node& resolved, bool force,
+                   bool resume, const Inputs& inputs = {},
+                   const std::vector<std::string>& own_outputs = {}, bool check_only = false);
 
 // The inputs a config names (config file, data root, split file, body model, weights files).
 Inputs config_inputs(const Config& config, const std::string& config_file);
@@ -89,15 +89,15 @@ int lock_run_dir(const std::filesystem::path& dir, const std::string& app_name);
 // What the commands that use a trained model share (eval, render, mesh): the checkpoint and
 // the split setting whose people and reference views they use.
 struct ModelOptions {
-  std::string checkpoint;  // ours (.pt) or the reference's (.pth)
-  std::string setting;     // overrides eval.setting when set
+  std::string checkpoint;       // ours (.pt) or the reference's (.pth)
+  std::string setting;          // overrides eval.setting when set
   std::string reference_views;  // "a,b,c": overrides data.reference_views when set
 };
 
 // Registers --checkpoint, --setting and --reference-views on `cli`.
 void add_model_options(CLI::App& cli, ModelOptions& model);
-// After parsing: turns --setting and --reference-views into overrides and fails unless a checkpoint is named (a
-// dry run needs none).
+// After parsing: turns --setting and --reference-views into overrides and fails unless a checkpoint
+// is named (a dry run needs none).
 void apply_model_options(const ModelOptions& model, CommonOptions& options);
 
 struct RunContext {

@@ -13,7 +13,8 @@
 namespace th::app {
 
 void add_nproc_option(CLI::App& cli, int& nproc, const std::string& what) {
-  cli.add_option("--nproc", nproc, what + " over this many local worker processes (at most 8 per core)")
+  cli.add_option("--nproc", nproc,
+                 what + " over this many local worker processes (at most 8 per core)")
       ->check(in_range(1, 1024));
 }
 
@@ -27,10 +28,12 @@ std::optional<int> launch_ranks(int nproc, const CommonOptions& options, int arg
                                 const std::string& app, const std::string& default_out) {
   if (nproc <= 1 || options.dry_run) return std::nullopt;
   if (std::getenv("WORLD_SIZE"))
-    fail("--nproc starts the ranks itself; it cannot be used inside a launcher (WORLD_SIZE is set)");
+    fail(
+        "--nproc starts the ranks itself; it cannot be used inside a launcher (WORLD_SIZE is set)");
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
   if (nproc > 8 * cores)
-    fail("--nproc ", nproc, " is more than 8 ranks per core (this machine has ", cores, "); at most ", 8 * cores);
+    fail("--nproc ", nproc, " is more than 8 ranks per core (this machine has ", cores,
+         "); at most ", 8 * cores);
   const auto config = config::load<Config>(options.config, options.overrides);
   dist::LaunchOptions launch;
   launch.nproc = nproc;

@@ -5,7 +5,6 @@
 // writes the run folder and logs; the others compute and report errors only.
 
 #include <CLI/CLI.hpp>
-
 #include <memory>
 #include <optional>
 #include <string>

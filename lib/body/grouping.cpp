@@ -30,8 +30,9 @@ class CanonicalKMeans : public Grouping {
   explicit CanonicalKMeans(GroupingConfig c) : c_(std::move(c)) {}
   torch::Tensor labels(const torch::Tensor& canonical, const torch::Tensor&) override {
     if (!labels_.defined()) {
-      labels_ = uses_reference_kmeans(c_) ? load_reference_kmeans(c_.kmeans_file, canonical.size(0))
-                                          : kmeans_cached(canonical, c_.num_tokens, c_.seed, c_.cache_dir);
+      labels_ = uses_reference_kmeans(c_)
+                    ? load_reference_kmeans(c_.kmeans_file, canonical.size(0))
+                    : kmeans_cached(canonical, c_.num_tokens, c_.seed, c_.cache_dir);
     }
     return labels_;
   }
@@ -141,7 +142,8 @@ torch::Tensor kmeans_cached(const torch::Tensor& points, int k, int64_t seed,
     if (ec) fail("cannot create the folder: ", ec.message());
     io::write_npy(file, labels);
   } catch (const Error& e) {
-    spdlog::warn("k-means labels not cached in '{}' ({}): model.grouping.cache_dir", cache_dir.string(), e.what());
+    spdlog::warn("k-means labels not cached in '{}' ({}): model.grouping.cache_dir",
+                 cache_dir.string(), e.what());
   }
   return labels;
 }
@@ -152,7 +154,8 @@ torch::Tensor load_reference_kmeans(const fs::path& file, int64_t num_vertices) 
   if (!labels) fail("'", file.string(), "' has no 'pc2voxel_ind' (expected kmeans_dict_300.npy)");
   auto t = labels->as_tensor().to(torch::kInt64).reshape({-1});
   if (t.numel() == 0) fail("'", file.string(), "' has no labels in 'pc2voxel_ind'");
-  if (t.min().item<int64_t>() < 0) fail("'", file.string(), "' has negative labels in 'pc2voxel_ind'");
+  if (t.min().item<int64_t>() < 0)
+    fail("'", file.string(), "' has negative labels in 'pc2voxel_ind'");
   if (num_vertices >= 0 && t.numel() != num_vertices)
     fail("'", file.string(), "' labels ", t.numel(), " vertices, the body has ", num_vertices);
   // Compact to [0, clusters) in case some label is unused.
@@ -168,18 +171,21 @@ std::string describe(const GroupingConfig& c) {
   switch (c.kind) {
     case GroupingKind::canonical_kmeans:
       if (uses_reference_kmeans(c)) return kind + " from the reference file " + c.kmeans_file;
-      return kind + " num_tokens=" + std::to_string(c.num_tokens) + " seed=" + std::to_string(c.seed);
-    case GroupingKind::canonical_grid: return kind + " num_tokens=" + std::to_string(c.num_tokens);
+      return kind + " num_tokens=" + std::to_string(c.num_tokens) +
+             " seed=" + std::to_string(c.seed);
+    case GroupingKind::canonical_grid:
+      return kind + " num_tokens=" + std::to_string(c.num_tokens);
     case GroupingKind::observation_grid:
-      return kind + " num_tokens=" + std::to_string(c.num_tokens) + " (per frame, from the posed body)";
+      return kind + " num_tokens=" + std::to_string(c.num_tokens) +
+             " (per frame, from the posed body)";
   }
   return kind;
 }
 
 void check_labels(const torch::Tensor& labels, const std::string& source) {
   if (labels.scalar_type() != torch::kInt64 || labels.dim() != 1 || labels.numel() == 0)
-    fail(source, ": token labels must be a non-empty 1-D int64 tensor, not ", labels.scalar_type(), " of shape ",
-         labels.sizes());
+    fail(source, ": token labels must be a non-empty 1-D int64 tensor, not ", labels.scalar_type(),
+         " of shape ", labels.sizes());
   const int64_t lo = labels.min().item<int64_t>(), hi = labels.max().item<int64_t>();
   if (lo < 0 || hi >= labels.numel())
     fail(source, ": token labels run from ", lo, " to ", hi, " for ", labels.numel(), " vertices");
@@ -208,7 +214,8 @@ torch::Tensor grid_labels(const torch::Tensor& points, int target_cells) {
     const double cell = std::sqrt(small * large);
     int64_t count = 0;
     auto labels = label_with(cell, count);
-    if (std::abs(count - target_cells) < best_gap) best_gap = std::abs(count - target_cells), best = labels;
+    if (std::abs(count - target_cells) < best_gap)
+      best_gap = std::abs(count - target_cells), best = labels;
     if (count == target_cells) break;
     (count > target_cells ? small : large) = cell;
   }
@@ -221,9 +228,12 @@ torch::Tensor cluster_sizes(const torch::Tensor& labels) {
 
 std::unique_ptr<Grouping> make_grouping(const GroupingConfig& c) {
   switch (c.kind) {
-    case GroupingKind::canonical_kmeans: return std::make_unique<CanonicalKMeans>(c);
-    case GroupingKind::canonical_grid: return std::make_unique<CanonicalGrid>(c.num_tokens);
-    case GroupingKind::observation_grid: return std::make_unique<ObservationGrid>(c.num_tokens);
+    case GroupingKind::canonical_kmeans:
+      return std::make_unique<CanonicalKMeans>(c);
+    case GroupingKind::canonical_grid:
+      return std::make_unique<CanonicalGrid>(c.num_tokens);
+    case GroupingKind::observation_grid:
+      return std::make_unique<ObservationGrid>(c.num_tokens);
   }
   fail("unknown grouping kind ", int(c.kind));
 }

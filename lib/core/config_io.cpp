@@ -70,7 +70,8 @@ void check_values(const YAML::Node& node, const std::string& path, const fs::pat
   for (const auto& kv : node) {
     const std::string key = kv.first.Scalar();
     const std::string full = path.empty() ? key : path + "." + key;
-    if (!keys.insert(key).second) fail("config file '", file.string(), "': key '", full, "' appears twice");
+    if (!keys.insert(key).second)
+      fail("config file '", file.string(), "': key '", full, "' appears twice");
     if (kv.second.IsNull() && full != "parent")
       fail("config file '", file.string(), "': key '", full, "' has no value");
     if (kv.second.IsMap()) check_values(kv.second, full, file);
@@ -81,7 +82,8 @@ void check_values(const YAML::Node& node, const std::string& path, const fs::pat
 constexpr size_t kMaxParents = 32;
 constexpr uintmax_t kMaxConfigBytes = uintmax_t{1} << 20;
 
-YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain, std::vector<fs::path>& named) {
+YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain,
+                           std::vector<fs::path>& named) {
   std::error_code ec;
   const fs::path canonical = fs::weakly_canonical(file, ec);
   refuse_special_file(file, "config file");
@@ -93,7 +95,8 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain, s
   chain.push_back(canonical);
   named.push_back(file);
   if (const auto bytes = fs::file_size(file, ec); !ec && bytes > kMaxConfigBytes)
-    fail("config file '", file.string(), "' is ", bytes, " bytes, more than a config may be (", kMaxConfigBytes, ")");
+    fail("config file '", file.string(), "' is ", bytes, " bytes, more than a config may be (",
+         kMaxConfigBytes, ")");
 
   YAML::Node node;
   try {
@@ -103,7 +106,8 @@ YAML::Node load_file_chain(const fs::path& file, std::vector<fs::path>& chain, s
          e.mark.column + 1, ": ", e.msg);
   }
   if (node.IsNull())
-    fail("config file '", file.string(), "' is empty (a config names at least its parent: 'parent: default.yaml')");
+    fail("config file '", file.string(),
+         "' is empty (a config names at least its parent: 'parent: default.yaml')");
   if (!node.IsMap()) fail("config file '", file.string(), "' must hold a map of keys");
   check_graph(node, "config file '" + file.string() + "'");
   check_values(node, "", file);
@@ -203,8 +207,9 @@ void Reader::check_unknown() const {
 void write_yaml(const fs::path& file, const YAML::Node& tree) {
   YAML::Emitter out;
   out << tree;
-  write_file_atomic(file, std::string("# Resolved configuration: every option with the value this run used.\n") +
-                              out.c_str() + "\n");
+  write_file_atomic(
+      file, std::string("# Resolved configuration: every option with the value this run used.\n") +
+                out.c_str() + "\n");
 }
 
 std::optional<int64_t> decimal_integer(const std::string& text) {
@@ -212,7 +217,8 @@ std::optional<int64_t> decimal_integer(const std::string& text) {
   const char* end = begin + text.size();
   const bool plus = begin != end && *begin == '+';  // from_chars takes '-' only
   if (plus) ++begin;
-  if (begin == end || !(std::isdigit(static_cast<unsigned char>(*begin)) || (*begin == '-' && !plus)))
+  if (begin == end ||
+      !(std::isdigit(static_cast<unsigned char>(*begin)) || (*begin == '-' && !plus)))
     return std::nullopt;
   int64_t v = 0;
   const auto [stop, ec] = std::from_chars(begin, end, v, 10);
@@ -228,17 +234,22 @@ std::string join_path(const std::string& prefix, const std::string& key) {
 
 void type_error(const std::string& path, const YAML::Node& node, const char* expected) {
   std::string got;
-  if (node.IsScalar()) got = "'" + node.Scalar() + "'";
-  else if (node.IsSequence()) got = "a list";
-  else if (node.IsMap()) got = "a section";
-  else got = "nothing";
+  if (node.IsScalar())
+    got = "'" + node.Scalar() + "'";
+  else if (node.IsSequence())
+    got = "a list";
+  else if (node.IsMap())
+    got = "a section";
+  else
+    got = "nothing";
   fail("config key '", path, "' must be ", expected, ", got ", got);
 }
 
 bool scalar_to(const YAML::Node& node, bool& out) { return YAML::convert<bool>::decode(node, out); }
 bool scalar_to(const YAML::Node& node, int& out) {
   const auto v = decimal_integer(node.Scalar());
-  if (!v || *v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max()) return false;
+  if (!v || *v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max())
+    return false;
   out = int(*v);
   return true;
 }
@@ -250,7 +261,9 @@ bool scalar_to(const YAML::Node& node, int64_t& out) {
 bool scalar_to(const YAML::Node& node, double& out) {
   return YAML::convert<double>::decode(node, out);
 }
-bool scalar_to(const YAML::Node& node, float& out) { return YAML::convert<float>::decode(node, out); }
+bool scalar_to(const YAML::Node& node, float& out) {
+  return YAML::convert<float>::decode(node, out);
+}
 bool scalar_to(const YAML::Node& node, std::string& out) {
   out = node.Scalar();
   return true;
@@ -262,9 +275,11 @@ bool scalar_to(const YAML::Node& node, std::string& out) {
 namespace th::config {
 namespace {
 
-void collect_leaves(const YAML::Node& node, const std::string& prefix, std::map<std::string, std::string>& out) {
+void collect_leaves(const YAML::Node& node, const std::string& prefix,
+                    std::map<std::string, std::string>& out) {
   if (node.IsMap()) {
-    for (const auto& kv : node) collect_leaves(kv.second, detail::join_path(prefix, kv.first.as<std::string>()), out);
+    for (const auto& kv : node)
+      collect_leaves(kv.second, detail::join_path(prefix, kv.first.as<std::string>()), out);
   } else {
     out[prefix] = YAML::Dump(node);
   }

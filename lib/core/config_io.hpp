@@ -82,20 +82,41 @@ bool scalar_to(const YAML::Node& node, int64_t& out);
 bool scalar_to(const YAML::Node& node, double& out);
 bool scalar_to(const YAML::Node& node, float& out);
 bool scalar_to(const YAML::Node& node, std::string& out);
-template <class T> const char* type_label();
-template <> inline const char* type_label<bool>() { return "a boolean"; }
-template <> inline const char* type_label<int>() { return "an integer"; }
-template <> inline const char* type_label<int64_t>() { return "an integer"; }
-template <> inline const char* type_label<double>() { return "a number"; }
-template <> inline const char* type_label<float>() { return "a number"; }
-template <> inline const char* type_label<std::string>() { return "a string"; }
+template <class T>
+const char* type_label();
+template <>
+inline const char* type_label<bool>() {
+  return "a boolean";
+}
+template <>
+inline const char* type_label<int>() {
+  return "an integer";
+}
+template <>
+inline const char* type_label<int64_t>() {
+  return "an integer";
+}
+template <>
+inline const char* type_label<double>() {
+  return "a number";
+}
+template <>
+inline const char* type_label<float>() {
+  return "a number";
+}
+template <>
+inline const char* type_label<std::string>() {
+  return "a string";
+}
 
 template <class T>
-constexpr bool is_scalar_v = std::is_same_v<T, bool> || std::is_same_v<T, int> ||
-                             std::is_same_v<T, int64_t> || std::is_same_v<T, double> ||
-                             std::is_same_v<T, float> || std::is_same_v<T, std::string>;
-template <class T> struct is_vector : std::false_type {};
-template <class T> struct is_vector<std::vector<T>> : std::true_type {};
+constexpr bool is_scalar_v =
+    std::is_same_v<T, bool> || std::is_same_v<T, int> || std::is_same_v<T, int64_t> ||
+    std::is_same_v<T, double> || std::is_same_v<T, float> || std::is_same_v<T, std::string>;
+template <class T>
+struct is_vector : std::false_type {};
+template <class T>
+struct is_vector<std::vector<T>> : std::true_type {};
 
 // ADL hook: sections may define validate_section(const T&, const std::string& path).
 template <class T>
@@ -147,7 +168,8 @@ class Reader {
       }
     std::string list;
     for (const auto& n : names) list += std::string(list.empty() ? "" : ", ") + n.first;
-    fail("config key '", detail::join_path(path_, key), "': '", text, "' is not one of {", list, "}");
+    fail("config key '", detail::join_path(path_, key), "': '", text, "' is not one of {", list,
+         "}");
   }
 
   // Throws naming the first key of the map that no field claimed (with the closest known key).

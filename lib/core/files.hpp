@@ -14,12 +14,18 @@ namespace th {
 inline const char* file_kind(std::filesystem::file_type type) {
   using std::filesystem::file_type;
   switch (type) {
-    case file_type::directory: return "folder";
-    case file_type::fifo: return "FIFO (named pipe)";
-    case file_type::character: return "character device";
-    case file_type::block: return "block device";
-    case file_type::socket: return "socket";
-    default: return "special file";
+    case file_type::directory:
+      return "folder";
+    case file_type::fifo:
+      return "FIFO (named pipe)";
+    case file_type::character:
+      return "character device";
+    case file_type::block:
+      return "block device";
+    case file_type::socket:
+      return "socket";
+    default:
+      return "special file";
   }
 }
 
@@ -28,7 +34,9 @@ inline const char* file_kind(std::filesystem::file_type type) {
 inline void refuse_special_file(const std::filesystem::path& path, const std::string& what) {
   std::error_code ec;
   const auto type = std::filesystem::status(path, ec).type();
-  if (ec || type == std::filesystem::file_type::not_found || type == std::filesystem::file_type::regular) return;
+  if (ec || type == std::filesystem::file_type::not_found ||
+      type == std::filesystem::file_type::regular)
+    return;
   fail(what, " '", path.string(), "' is a ", file_kind(type), ", not a file");
 }
 

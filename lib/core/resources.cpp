@@ -31,16 +31,18 @@ void check(const Estimate& e, double max_memory_gb) {
   std::string time;
   if (e.samples > 0 && e.threads > 0) {
     const double seconds = e.samples / (kSamplesPerSecondPerThread * e.threads);
-    time = seconds < 120 ? fmt::format(", about {:.0f} s", seconds)
-                         : seconds < 7200 ? fmt::format(", about {:.0f} min", seconds / 60)
-                                          : fmt::format(", about {:.1f} h", seconds / 3600);
+    time = seconds < 120    ? fmt::format(", about {:.0f} s", seconds)
+           : seconds < 7200 ? fmt::format(", about {:.0f} min", seconds / 60)
+                            : fmt::format(", about {:.1f} h", seconds / 3600);
     time += fmt::format(" on {} CPU thread{}", e.threads, e.threads == 1 ? "" : "s");
   }
-  const std::string samples = e.samples > 0 ? fmt::format(", up to {:.3g} network samples", e.samples) : "";
+  const std::string samples =
+      e.samples > 0 ? fmt::format(", up to {:.3g} network samples", e.samples) : "";
   const double limit = memory_limit_bytes(max_memory_gb);
   spdlog::info("{}: estimated peak memory {}{}{}", e.what, bytes_text(e.bytes), samples, time);
   if (e.bytes > limit)
-    fail(e.what, ": estimated peak memory ", bytes_text(e.bytes), " is above the limit of ", bytes_text(limit),
+    fail(e.what, ": estimated peak memory ", bytes_text(e.bytes), " is above the limit of ",
+         bytes_text(limit),
          max_memory_gb > 0 ? " (max_memory_gb=" + fmt::format("{}", max_memory_gb) + ")"
                            : std::string(" (3/4 of this machine's memory)"),
          "; ask for less, or raise the limit with max_memory_gb=<GiB>");

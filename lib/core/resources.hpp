@@ -23,10 +23,10 @@ constexpr double kBytesPerChunkPoint = 200.0 * 1024;
 constexpr double kSamplesPerSecondPerThread = 70000;
 
 struct Estimate {
-  std::string what;         // "render 512 x 512 x 36 frames"
-  double bytes = 0;         // peak working memory
-  double samples = 0;       // upper bound of network samples (0: not known)
-  int threads = 1;          // CPU threads for the time estimate (0: not on the CPU)
+  std::string what;    // "render 512 x 512 x 36 frames"
+  double bytes = 0;    // peak working memory
+  double samples = 0;  // upper bound of network samples (0: not known)
+  int threads = 1;     // CPU threads for the time estimate (0: not on the CPU)
 };
 
 // Logs the estimate (memory, samples, time) and throws th::Error when the memory is above the

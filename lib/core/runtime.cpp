@@ -4,22 +4,21 @@
 #if defined(__x86_64__) || defined(__i386__)
 #include <cpuid.h>
 #endif
+#include <ATen/Parallel.h>
 #include <malloc.h>
 #include <spdlog/spdlog.h>
 #include <torch/cuda.h>
 #include <torch/utils.h>
 
-#include <ATen/Parallel.h>
-
 #include <algorithm>
-#include <mutex>
-#include <set>
 #include <cstdlib>
 #include <cstring>
-#include <limits>
 #include <filesystem>
-#include <thread>
 #include <fstream>
+#include <limits>
+#include <mutex>
+#include <set>
+#include <thread>
 
 #include "core/error.hpp"
 
@@ -50,9 +49,11 @@ bool keep_freed_memory() {
   const char* mode = std::getenv("TH_MALLOC");
   if (mode && std::strcmp(mode, "system") == 0) return false;
   if (mode && *mode && std::strcmp(mode, "keep") != 0)
-    fail("environment variable TH_MALLOC='", mode, "': expected 'system' (glibc defaults) or 'keep'");
+    fail("environment variable TH_MALLOC='", mode,
+         "': expected 'system' (glibc defaults) or 'keep'");
 #ifdef __GLIBC__
-  return mallopt(M_MMAP_MAX, 0) == 1 && mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()) == 1;
+  return mallopt(M_MMAP_MAX, 0) == 1 &&
+         mallopt(M_TRIM_THRESHOLD, std::numeric_limits<int>::max()) == 1;
 #else
   return false;
 #endif
@@ -91,10 +92,11 @@ BlasInfo detect_blas() {
 void log_blas() {
   const BlasInfo b = detect_blas();
   if (b.slow) {
-    spdlog::warn("!!! LibTorch is using the slow reference BLAS ({}): matrix products run 16-23x "
-                 "slower. Install OpenBLAS: apt-get install libopenblas0-pthread (or run "
-                 "scripts/install-deps.sh) !!!",
-                 b.library);
+    spdlog::warn(
+        "!!! LibTorch is using the slow reference BLAS ({}): matrix products run 16-23x "
+        "slower. Install OpenBLAS: apt-get install libopenblas0-pthread (or run "
+        "scripts/install-deps.sh) !!!",
+        b.library);
   } else {
     spdlog::info("BLAS: {} ({}){}", b.name, b.library.empty() ? "not loaded" : b.library,
                  b.details.empty() ? "" : " [" + b.details + "]");
@@ -106,7 +108,7 @@ CpuBf16 detect_cpu_bf16() {
 #if defined(__x86_64__) || defined(__i386__)
   unsigned a = 0, b = 0, cx = 0, d = 0;
   if (__get_cpuid_count(7, 0, &a, &b, &cx, &d)) {
-    const unsigned leaf1_max = a;  // subleaves of leaf 7
+    const unsigned leaf1_max = a;                                // subleaves of leaf 7
     c.avx512 = (b >> 16 & 1) && (b >> 30 & 1) && (b >> 31 & 1);  // AVX512F, BW, VL
     c.amx_bf16 = d >> 22 & 1;
     if (leaf1_max >= 1 && __get_cpuid_count(7, 1, &a, &b, &cx, &d)) c.avx512_bf16 = a >> 5 & 1;
@@ -127,11 +129,13 @@ torch::Device select_device(const std::string& requested) {
   if (requested == "cpu") return torch::kCPU;
   if (requested == "cuda") {
     if (!has_cuda)
-      fail("device 'cuda' requested, but the linked LibTorch has no CUDA or no GPU is visible "
-           "(use --device cpu or auto)");
+      fail(
+          "device 'cuda' requested, but the linked LibTorch has no CUDA or no GPU is visible "
+          "(use --device cpu or auto)");
     return torch::kCUDA;
   }
-  if (requested == "auto") return has_cuda ? torch::Device(torch::kCUDA) : torch::Device(torch::kCPU);
+  if (requested == "auto")
+    return has_cuda ? torch::Device(torch::kCUDA) : torch::Device(torch::kCPU);
   fail("unknown device '", requested, "' (expected auto, cpu or cuda)");
 }
 
@@ -141,7 +145,8 @@ int set_threads(int threads) {
   const int cores = static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
   // More threads than this only adds scheduling overhead; 100000 would hang thread creation.
   if (threads > 8 * cores)
-    fail("threads=", threads, " is more than 8 per core (this machine has ", cores, "); at most ", 8 * cores);
+    fail("threads=", threads, " is more than 8 per core (this machine has ", cores, "); at most ",
+         8 * cores);
   if (threads <= 0) threads = cores;
   torch::set_num_threads(threads);
   return torch::get_num_threads();
@@ -156,7 +161,8 @@ void set_blas_threads(int threads) {
   if (const auto set = find_symbol<void (*)(int)>("openblas_set_num_threads")) set(threads);
 }
 
-ScopedThreads::ScopedThreads(int threads) : torch_(torch::get_num_threads()), blas_(blas_threads()) {
+ScopedThreads::ScopedThreads(int threads)
+    : torch_(torch::get_num_threads()), blas_(blas_threads()) {
   torch::set_num_threads(threads);
   set_blas_threads(threads);
 }

@@ -8,10 +8,10 @@
 namespace th::runtime {
 
 struct BlasInfo {
-  std::string name;       // "OpenBLAS", "BLIS", "MKL", "reference BLAS" or "unknown"
-  std::string library;    // resolved path of the loaded libblas
-  std::string details;    // e.g. OpenBLAS's config string and threading model
-  bool slow = false;      // true for the reference (netlib) BLAS
+  std::string name;     // "OpenBLAS", "BLIS", "MKL", "reference BLAS" or "unknown"
+  std::string library;  // resolved path of the loaded libblas
+  std::string details;  // e.g. OpenBLAS's config string and threading model
+  bool slow = false;    // true for the reference (netlib) BLAS
 };
 
 // Inspects the libraries loaded into this process (/proc/self/maps + dlsym).

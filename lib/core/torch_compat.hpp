@@ -27,13 +27,15 @@ using CollectiveGroup = c10d::ProcessGroup;
 // The type of the totals that c10's allocator reports to a MemoryReportingInfoBase (int64_t in
 // 1.13, size_t in 2.x), read from the declaration itself rather than from a version number.
 namespace detail {
-template <class F> struct third_argument;
+template <class F>
+struct third_argument;
 template <class C, class R, class A1, class A2, class A3, class A4, class A5>
 struct third_argument<R (C::*)(A1, A2, A3, A4, A5)> {
   using type = A3;
 };
 }  // namespace detail
-using MemoryTotal = detail::third_argument<decltype(&c10::MemoryReportingInfoBase::reportMemoryUsage)>::type;
+using MemoryTotal =
+    detail::third_argument<decltype(&c10::MemoryReportingInfoBase::reportMemoryUsage)>::type;
 
 // c10d's TCPStore: from 2.x on its options ask for the libuv backend by default, which builds
 // without libuv (Debian 13's 2.6) refuse at rendezvous; the classic backend works everywhere.
@@ -48,22 +50,36 @@ void use_classic_tcpstore(Options&, long) {}
 // Autocast state per device type. 2.4 moved it to functions taking the device type (the
 // per-device names of 1.13 are deprecated there).
 #if TORCH_VERSION_MAJOR > 2 || (TORCH_VERSION_MAJOR == 2 && TORCH_VERSION_MINOR >= 4)
-inline bool autocast_enabled(bool cuda) { return at::autocast::is_autocast_enabled(cuda ? at::kCUDA : at::kCPU); }
-inline void set_autocast_enabled(bool cuda, bool on) { at::autocast::set_autocast_enabled(cuda ? at::kCUDA : at::kCPU, on); }
-inline at::ScalarType autocast_dtype(bool cuda) { return at::autocast::get_autocast_dtype(cuda ? at::kCUDA : at::kCPU); }
-inline void set_autocast_dtype(bool cuda, at::ScalarType t) { at::autocast::set_autocast_dtype(cuda ? at::kCUDA : at::kCPU, t); }
-#else
-inline bool autocast_enabled(bool cuda) { return cuda ? at::autocast::is_enabled() : at::autocast::is_cpu_enabled(); }
+inline bool autocast_enabled(bool cuda) {
+  return at::autocast::is_autocast_enabled(cuda ? at::kCUDA : at::kCPU);
+}
 inline void set_autocast_enabled(bool cuda, bool on) {
-  if (cuda) at::autocast::set_enabled(on);
-  else at::autocast::set_cpu_enabled(on);
+  at::autocast::set_autocast_enabled(cuda ? at::kCUDA : at::kCPU, on);
+}
+inline at::ScalarType autocast_dtype(bool cuda) {
+  return at::autocast::get_autocast_dtype(cuda ? at::kCUDA : at::kCPU);
+}
+inline void set_autocast_dtype(bool cuda, at::ScalarType t) {
+  at::autocast::set_autocast_dtype(cuda ? at::kCUDA : at::kCPU, t);
+}
+#else
+inline bool autocast_enabled(bool cuda) {
+  return cuda ? at::autocast::is_enabled() : at::autocast::is_cpu_enabled();
+}
+inline void set_autocast_enabled(bool cuda, bool on) {
+  if (cuda)
+    at::autocast::set_enabled(on);
+  else
+    at::autocast::set_cpu_enabled(on);
 }
 inline at::ScalarType autocast_dtype(bool cuda) {
   return cuda ? at::autocast::get_autocast_gpu_dtype() : at::autocast::get_autocast_cpu_dtype();
 }
 inline void set_autocast_dtype(bool cuda, at::ScalarType t) {
-  if (cuda) at::autocast::set_autocast_gpu_dtype(t);
-  else at::autocast::set_autocast_cpu_dtype(t);
+  if (cuda)
+    at::autocast::set_autocast_gpu_dtype(t);
+  else
+    at::autocast::set_autocast_cpu_dtype(t);
 }
 #endif
 

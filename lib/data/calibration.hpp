@@ -11,10 +11,11 @@ namespace th::data {
 
 // The tolerances, stated once.
 struct CalibrationLimits {
-  static constexpr double kRotation = 1e-3;        // max |R R^T - I| and |det R - 1|
-  static constexpr double kMinDistance = 0.2;      // metres from a camera's centre to the body's
+  static constexpr double kRotation = 1e-3;    // max |R R^T - I| and |det R - 1|
+  static constexpr double kMinDistance = 0.2;  // metres from a camera's centre to the body's
   static constexpr double kMaxDistance = 100.0;
-  static constexpr double kMinInImage = 0.5;       // fraction of the body's vertices in a reference image
+  static constexpr double kMinInImage =
+      0.5;  // fraction of the body's vertices in a reference image
 };
 
 // Why intrinsics `K` (3, 3) cannot be used, or "" when they can: focal lengths positive and
@@ -29,7 +30,7 @@ std::string implausible_rotation(const torch::Tensor& R);
 // camera (K, R, T (3, 1)) of a `width` x `height` image, or "": its centre between kMinDistance
 // and kMaxDistance from the camera, in front of it, and at least kMinInImage of the vertices
 // inside the image.
-std::string implausible_view(const torch::Tensor& vertices, const torch::Tensor& K, const torch::Tensor& R,
-                             const torch::Tensor& T, int width, int height);
+std::string implausible_view(const torch::Tensor& vertices, const torch::Tensor& K,
+                             const torch::Tensor& R, const torch::Tensor& T, int width, int height);
 
 }  // namespace th::data

@@ -4,8 +4,8 @@
 
 #include <algorithm>
 #include <chrono>
-#include <numeric>
 #include <mutex>
+#include <numeric>
 #include <random>
 #include <set>
 
@@ -33,7 +33,8 @@ void warn_once(const std::string& message, const std::string& key = "") {
 // Calibration that cannot be right: an error, or (data.calibration_check: warn) one warning
 // per `key` (a camera of a person).
 void implausible(CalibrationCheck policy, const std::string& message, const std::string& key) {
-  if (policy == CalibrationCheck::error) fail(message, " (data.calibration_check: warn to go on anyway)");
+  if (policy == CalibrationCheck::error)
+    fail(message, " (data.calibration_check: warn to go on anyway)");
   warn_once(message + " (data.calibration_check: warn; going on)", key);
 }
 
@@ -60,7 +61,8 @@ std::shared_ptr<const body::SmplModel> load_body_model(const DataConfig& config)
   const fs::path path = config.smpl_model.empty() ? fs::path(config.root) / "smpl_model.npz"
                                                   : fs::path(config.smpl_model);
   if (!fs::exists(path))
-    fail("body model '", path.string(), "' does not exist (set data.smpl_model to SMPL's .pkl or "
+    fail("body model '", path.string(),
+         "' does not exist (set data.smpl_model to SMPL's .pkl or "
          "an .npz; transhuman-synth writes <root>/smpl_model.npz)");
   return std::make_shared<const body::SmplModel>(body::load_smpl(path));
 }
@@ -69,7 +71,8 @@ namespace {
 
 SplitSetting setting_of(const DataConfig& config, const std::string& setting, Dataset::Mode mode) {
   if (config.split_file.empty())
-    return whole_capture_setting(config.root, setting, mode == Dataset::Mode::Train, config.num_reference_views);
+    return whole_capture_setting(config.root, setting, mode == Dataset::Mode::Train,
+                                 config.num_reference_views);
   return load_split(config.split_file, setting);
 }
 
@@ -83,13 +86,19 @@ std::string camera_list(const HumanSequence& human, const std::vector<int>& came
 
 Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode,
                  std::shared_ptr<const body::SmplModel> smpl)
-    : config_(config), setting_(setting_of(config, setting, mode)), mode_(mode), smpl_(std::move(smpl)) {
+    : config_(config),
+      setting_(setting_of(config, setting, mode)),
+      mode_(mode),
+      smpl_(std::move(smpl)) {
   TORCH_CHECK(smpl_, "Dataset needs a body model");
   if (!fs::is_directory(config.root))
-    fail("data.root '", config.root, "' does not exist", config.dataset == DatasetKind::synthetic
-         ? " (make it with: transhuman-synth --out " + config.root + ")" : "");
-  const std::string split = config.split_file.empty() ? "data.root '" + config.root + "' (no split file)"
-                                                      : "split '" + config.split_file + "', setting '" + setting + "'";
+    fail("data.root '", config.root, "' does not exist",
+         config.dataset == DatasetKind::synthetic
+             ? " (make it with: transhuman-synth --out " + config.root + ")"
+             : "");
+  const std::string split = config.split_file.empty()
+                                ? "data.root '" + config.root + "' (no split file)"
+                                : "split '" + config.split_file + "', setting '" + setting + "'";
   for (const auto& range : setting_.humans) {
     auto human = open_human(human_folder(config.root, range.name, config.dataset),
                             {config.layout, config.person_id, smpl_, config.calibration_check});
@@ -103,11 +112,13 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
       if (!unusable.empty()) fail(where, unusable, named);
       const std::string why = implausible_rotation(cam.R);
       if (!why.empty())
-        implausible(config.calibration_check, where + why + named, human->dir().string() + "#R" + std::to_string(c));
+        implausible(config.calibration_check, where + why + named,
+                    human->dir().string() + "#R" + std::to_string(c));
     }
     const std::vector<int> frames = range.frames(human->num_frames());
     if (frames.empty())
-      fail(split, ": ", range.name, " has ", human->num_frames(), " frames, none of them from frame ", range.begin);
+      fail(split, ": ", range.name, " has ", human->num_frames(),
+           " frames, none of them from frame ", range.begin);
     // Reference views: data.reference_views, the setting's, or (no split) the most spread.
     Views views;
     const auto resolve = [&](const std::vector<CameraRef>& values, const std::string& where) {
@@ -117,28 +128,33 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
     };
     if (setting_.random_references) {
       if (setting_.num_reference_views > human->num_cameras())
-        fail(split, ": ", setting_.num_reference_views, " random references but ", range.name, " has ",
-             human->num_cameras(), " cameras");
+        fail(split, ": ", setting_.num_reference_views, " random references but ", range.name,
+             " has ", human->num_cameras(), " cameras");
     } else if (!config.reference_views.empty()) {
       for (const auto& v : config.reference_views)
         views.references.push_back(camera_index(*human, v, "data.reference_views"));
-      spdlog::info("{}: reference cameras {} (data.reference_views)", range.name, camera_list(*human, views.references));
+      spdlog::info("{}: reference cameras {} (data.reference_views)", range.name,
+                   camera_list(*human, views.references));
     } else if (!setting_.reference_views.empty()) {
       views.references = resolve(setting_.reference_views, split + ", reference_views");
     } else {
-      views.references = spread_cameras(*human, human->load_vertices(frames.front()), setting_.num_reference_views);
-      spdlog::info("{}: reference cameras {}: the {} most evenly spread around the body (data.reference_views "
-                   "or --reference-views chooses others)",
-                   range.name, camera_list(*human, views.references), views.references.size());
+      views.references = spread_cameras(*human, human->load_vertices(frames.front()),
+                                        setting_.num_reference_views);
+      spdlog::info(
+          "{}: reference cameras {}: the {} most evenly spread around the body "
+          "(data.reference_views "
+          "or --reference-views chooses others)",
+          range.name, camera_list(*human, views.references), views.references.size());
     }
     if (setting_.all_targets) {
       for (int c = 0; c < human->num_cameras(); ++c)
         if (!setting_.targets_exclude_references ||
-            std::find(views.references.begin(), views.references.end(), c) == views.references.end())
+            std::find(views.references.begin(), views.references.end(), c) ==
+                views.references.end())
           views.targets.push_back(c);
       if (views.targets.empty())
-        fail(split, ": ", range.name, " has no camera left as a target besides its ", views.references.size(),
-             " reference views");
+        fail(split, ": ", range.name, " has no camera left as a target besides its ",
+             views.references.size(), " reference views");
     } else {
       views.targets = resolve(setting_.target_views, split + ", target_views");
     }
@@ -147,11 +163,13 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
     humans_.push_back(std::move(human));
     views_.push_back(std::move(views));
   }
-  spdlog::info("dataset: {} '{}' — {} humans, {} samples", config::name_of(config.dataset), setting, humans_.size(),
-               items_.size());
+  spdlog::info("dataset: {} '{}' — {} humans, {} samples", config::name_of(config.dataset), setting,
+               humans_.size(), items_.size());
 }
 
-const std::vector<int>& Dataset::reference_views(int human) const { return views_.at(size_t(human)).references; }
+const std::vector<int>& Dataset::reference_views(int human) const {
+  return views_.at(size_t(human)).references;
+}
 
 FrameBody Dataset::load_body(const HumanSequence& human, int frame) const {
   const BodyParams params = human.load_params(frame);
@@ -208,12 +226,12 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   for (int v : s.reference_views) {
     const ViewImage view =
         load_view(human, it.frame, v, {config_.ratio, false, jittered ? &jitter : nullptr});
-    const std::string why = implausible_view(s.body.vertices, view.camera.K, view.camera.R, view.camera.T,
-                                             view.rgb.cols, view.rgb.rows);
+    const std::string why = implausible_view(s.body.vertices, view.camera.K, view.camera.R,
+                                             view.camera.T, view.rgb.cols, view.rgb.rows);
     if (!why.empty())
       implausible(config_.calibration_check,
-                  "'" + human.calibration_file().string() + "': reference camera " + std::to_string(v) +
-                      " of frame " + std::to_string(it.frame) + ": " + why,
+                  "'" + human.calibration_file().string() + "': reference camera " +
+                      std::to_string(v) + " of frame " + std::to_string(it.frame) + ": " + why,
                   human.dir().string() + "#view" + std::to_string(v));
     images.push_back(image_tensor(view.rgb).permute({2, 0, 1}));
     Ks.push_back(view.camera.K);
@@ -222,7 +240,8 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     if (config_.visibility == VisibilitySource::files) {
       const fs::path file = visibility_file(config_.visibility_root, human, it.frame, v);
       if (!fs::exists(file) && config_.visibility_missing == MissingVisibility::all_visible) {
-        warn_once("visibility file '" + file.string() + "' is missing: every vertex counts as visible " +
+        warn_once("visibility file '" + file.string() +
+                  "' is missing: every vertex counts as visible " +
                   "(data.visibility_missing: all_visible, as the reference silently did)");
         vis.push_back(torch::ones({smpl_->num_vertices()}, torch::kBool));
       } else {
@@ -243,9 +262,9 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
   s.visibility = torch::stack(vis);
 
   // Target view.
-  const ViewImage target =
-      load_view(human, it.frame, it.target_view,
-                {config_.ratio, true, jittered ? &jitter : nullptr, config_.border_band == BorderBand::distorted});
+  const ViewImage target = load_view(human, it.frame, it.target_view,
+                                     {config_.ratio, true, jittered ? &jitter : nullptr,
+                                      config_.border_band == BorderBand::distorted});
   const int W = target.rgb.cols, H = target.rgb.rows;
   s.target_image = image_tensor(target.rgb);
   s.target_mask = mask_tensor(target.mask);
@@ -264,22 +283,27 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
     const auto& p = config_.patch;
     if (config_.patch.size > W || config_.patch.size > H)
       fail("config key 'data.patch.size' = ", config_.patch.size, ": larger than the ", W, "x", H,
-           " target image of '", human.name(), "' view ", s.target_view, " (at data.ratio ", config_.ratio, ")");
+           " target image of '", human.name(), "' view ", s.target_view, " (at data.ratio ",
+           config_.ratio, ")");
     if (cv::countNonZero(bmask) == 0)
       fail("sample '", human.name(), "' frame ", it.frame, ", target view ", s.target_view,
-           ": the body's box is outside the image, no training patch can be sampled (is the body in that view? "
-           "check the calibration in '", human.calibration_file().string(), "')");
+           ": the body's box is outside the image, no training patch can be sampled (is the body "
+           "in that view? "
+           "check the calibration in '",
+           human.calibration_file().string(), "')");
     const auto patches = sample_patches(person / 255, bmask, p.count, p.size, p.body_prob, rng);
     s.patch_rgb = torch::zeros({int64_t(patches.size()), 3, p.size, p.size}, torch::kFloat32);
     std::vector<torch::Tensor> px, slot;
     for (size_t i = 0; i < patches.size(); ++i) {
       const Patch& q = patches[i];
-      s.patch_rgb[i].index_put_({Slice(), Slice(0, q.height), Slice(0, q.width)},
-                                s.target_image.index({Slice(q.y0, q.y0 + q.height), Slice(q.x0, q.x0 + q.width)})
-                                    .permute({2, 0, 1}));
+      s.patch_rgb[i].index_put_(
+          {Slice(), Slice(0, q.height), Slice(0, q.width)},
+          s.target_image.index({Slice(q.y0, q.y0 + q.height), Slice(q.x0, q.x0 + q.width)})
+              .permute({2, 0, 1}));
       auto local = pixel_grid(q.width, q.height);
       px.push_back(local + torch::tensor({q.x0, q.y0}, torch::kInt64));
-      slot.push_back(int64_t(i) * p.size * p.size + local.select(1, 1) * p.size + local.select(1, 0));
+      slot.push_back(int64_t(i) * p.size * p.size + local.select(1, 1) * p.size +
+                     local.select(1, 0));
     }
     pixels = torch::cat(px);
     s.ray_patch_index = torch::cat(slot);
@@ -305,7 +329,9 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
 
 Prefetcher::Prefetcher(std::shared_ptr<const Dataset> dataset, std::vector<size_t> order,
                        std::vector<uint64_t> seeds, int workers, int depth)
-    : dataset_(std::move(dataset)), order_(std::move(order)), seeds_(std::move(seeds)),
+    : dataset_(std::move(dataset)),
+      order_(std::move(order)),
+      seeds_(std::move(seeds)),
       depth_(std::max(1, depth)) {
   TORCH_CHECK(order_.size() == seeds_.size(), "Prefetcher: one seed per sample");
   for (int i = 0; i < workers; ++i) threads_.emplace_back([this] { work(); });
@@ -325,7 +351,8 @@ void Prefetcher::work() {
     size_t pos;
     {
       std::unique_lock<std::mutex> lock(mutex_);
-      cv_.wait(lock, [&] { return stop_ || (claimed_ < order_.size() && claimed_ < next_ + depth_); });
+      cv_.wait(lock,
+               [&] { return stop_ || (claimed_ < order_.size() && claimed_ < next_ + depth_); });
       if (stop_ || claimed_ >= order_.size()) return;
       pos = claimed_++;
     }
@@ -338,8 +365,10 @@ void Prefetcher::work() {
     }
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (error) errors_[pos] = error;
-      else ready_.emplace(pos, std::move(sample));
+      if (error)
+        errors_[pos] = error;
+      else
+        ready_.emplace(pos, std::move(sample));
     }
     cv_.notify_all();
   }

@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "core/config.hpp"
-#include "data/split.hpp"
 #include "data/sequence.hpp"
+#include "data/split.hpp"
 
 namespace th::body {
 struct SmplModel;
@@ -27,17 +27,17 @@ namespace th::data {
 
 // The body of one frame (METHOD 2.2, 2.3), float32.
 struct FrameBody {
-  torch::Tensor vertices;     // (Nv, 3) world
+  torch::Tensor vertices;       // (Nv, 3) world
   torch::Tensor smpl_vertices;  // (Nv, 3) SMPL frame: Rh^T (x - Th)
-  torch::Tensor Rh;           // (3, 3) rotation matrix
-  torch::Tensor Th;           // (3)
-  torch::Tensor A;            // (Nv, 3, 3) blended canonical -> posed rotations
-  torch::Tensor bounds;       // (2, 3) world box, z padded
+  torch::Tensor Rh;             // (3, 3) rotation matrix
+  torch::Tensor Th;             // (3)
+  torch::Tensor A;              // (Nv, 3, 3) blended canonical -> posed rotations
+  torch::Tensor bounds;         // (2, 3) world box, z padded
 };
 
 struct Sample {
   std::string human;
-  int frame = 0;         // index into annots' ims
+  int frame = 0;  // index into annots' ims
   int target_view = 0;
   std::vector<int> reference_views;
 
@@ -133,8 +133,8 @@ class Prefetcher {
   std::vector<size_t> order_;
   std::vector<uint64_t> seeds_;
   int depth_;
-  size_t next_ = 0;       // next position the consumer takes
-  size_t claimed_ = 0;    // next position a worker claims
+  size_t next_ = 0;     // next position the consumer takes
+  size_t claimed_ = 0;  // next position a worker claims
   bool stop_ = false;
   double wait_seconds_ = 0;
   std::mutex mutex_;

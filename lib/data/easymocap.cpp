@@ -1,20 +1,20 @@
 #include "data/easymocap.hpp"
 
-#include <nlohmann/json.hpp>
-#include <opencv2/calib3d.hpp>
-#include <opencv2/core/persistence.hpp>
-#include <opencv2/imgcodecs.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <cctype>
 #include <fstream>
+#include <nlohmann/json.hpp>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/persistence.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/files.hpp"
-#include "geometry/camera.hpp"
 #include "data/zju_mocap.hpp"
+#include "geometry/camera.hpp"
 
 namespace th::data {
 namespace fs = std::filesystem;
@@ -41,12 +41,14 @@ cv::FileStorage open_storage(const fs::path& file) {
 
 std::vector<std::string> read_names(const cv::FileStorage& storage, const fs::path& file) {
   const cv::FileNode node = storage["names"];
-  if (node.empty() || !node.isSeq()) fail("'", file.string(), "' has no 'names' list of camera names");
+  if (node.empty() || !node.isSeq())
+    fail("'", file.string(), "' has no 'names' list of camera names");
   std::vector<std::string> names;
   for (const auto& item : node) {
     if (!item.isString()) fail("'", file.string(), "': names[", names.size(), "] is not a string");
     const std::string name = item.string();
-    if (name.empty() || name == "." || name == ".." || name.find_first_of("/\\") != std::string::npos)
+    if (name.empty() || name == "." || name == ".." ||
+        name.find_first_of("/\\") != std::string::npos)
       fail("'", file.string(), "': names[", names.size(), "] = '", name, "' is not a folder name");
     if (std::find(names.begin(), names.end(), name) != names.end())
       fail("'", file.string(), "': camera '", name, "' is listed twice in 'names'");
@@ -57,8 +59,8 @@ std::vector<std::string> read_names(const cv::FileStorage& storage, const fs::pa
 }
 
 // A matrix entry as float64 (rows, cols); `shapes` lists the accepted (rows, cols).
-torch::Tensor read_matrix(const cv::FileStorage& storage, const fs::path& file, const std::string& key,
-                          std::vector<std::pair<int, int>> shapes) {
+torch::Tensor read_matrix(const cv::FileStorage& storage, const fs::path& file,
+                          const std::string& key, std::vector<std::pair<int, int>> shapes) {
   const cv::FileNode node = storage[key];
   if (node.empty()) fail("'", file.string(), "' has no '", key, "'");
   cv::Mat m;
@@ -67,28 +69,33 @@ torch::Tensor read_matrix(const cv::FileStorage& storage, const fs::path& file, 
   } catch (const cv::Exception& e) {
     fail("'", file.string(), "': '", key, "' is not an OpenCV matrix: ", e.err);
   }
-  const bool fits = std::any_of(shapes.begin(), shapes.end(), [&](auto s) { return m.rows == s.first && m.cols == s.second; });
+  const bool fits = std::any_of(shapes.begin(), shapes.end(),
+                                [&](auto s) { return m.rows == s.first && m.cols == s.second; });
   if (m.empty() || m.channels() != 1 || !fits) {
     std::string want;
-    for (auto [r, c] : shapes) want += (want.empty() ? "" : " or ") + std::to_string(r) + "x" + std::to_string(c);
-    fail("'", file.string(), "': '", key, "' is ", m.rows, "x", m.cols, (m.channels() > 1 ? " (multi-channel)" : ""),
-         ", expected ", want);
+    for (auto [r, c] : shapes)
+      want += (want.empty() ? "" : " or ") + std::to_string(r) + "x" + std::to_string(c);
+    fail("'", file.string(), "': '", key, "' is ", m.rows, "x", m.cols,
+         (m.channels() > 1 ? " (multi-channel)" : ""), ", expected ", want);
   }
   cv::Mat m64;
   m.convertTo(m64, CV_64F);
-  const torch::Tensor t = torch::from_blob(m64.ptr<double>(), {m64.rows, m64.cols}, torch::kFloat64).clone();
+  const torch::Tensor t =
+      torch::from_blob(m64.ptr<double>(), {m64.rows, m64.cols}, torch::kFloat64).clone();
   require_finite(t, file, "'" + key + "'");
   return t;
 }
 
 bool is_image(const fs::path& p) {
   std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   return ext == ".jpg" || ext == ".jpeg" || ext == ".png";
 }
 
 // A JSON array of numbers, nested to any depth ([[3]] and [3] alike), flattened.
-std::vector<double> numbers(const nlohmann::json& value, const fs::path& file, const std::string& where) {
+std::vector<double> numbers(const nlohmann::json& value, const fs::path& file,
+                            const std::string& where) {
   std::vector<double> out;
   const auto walk = [&](const auto& self, const nlohmann::json& v) -> void {
     if (v.is_array()) {
@@ -103,8 +110,8 @@ std::vector<double> numbers(const nlohmann::json& value, const fs::path& file, c
   return out;
 }
 
-torch::Tensor field(const nlohmann::json& person, const char* key, size_t expected, const fs::path& file,
-                    const std::string& who) {
+torch::Tensor field(const nlohmann::json& person, const char* key, size_t expected,
+                    const fs::path& file, const std::string& who) {
   if (!person.contains(key)) fail("'", file.string(), "': ", who, " has no '", key, "'");
   std::vector<double> v = numbers(person[key], file, who + "'s '" + key + "'");
   if ((expected > 0 && v.size() != expected) || v.empty())
@@ -115,10 +122,13 @@ torch::Tensor field(const nlohmann::json& person, const char* key, size_t expect
 
 }  // namespace
 
-std::shared_ptr<EasyMocapSequence> EasyMocapSequence::open(const fs::path& dir, const OpenOptions& options) {
+std::shared_ptr<EasyMocapSequence> EasyMocapSequence::open(const fs::path& dir,
+                                                           const OpenOptions& options) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) fail("human folder '", dir.string(), "' does not exist");
-  if (!options.smpl) fail(dir.string(), ": EasyMocap's layout needs the body model (data.smpl_model) for its vertices");
+  if (!options.smpl)
+    fail(dir.string(),
+         ": EasyMocap's layout needs the body model (data.smpl_model) for its vertices");
   std::shared_ptr<EasyMocapSequence> h(new EasyMocapSequence(dir.filename().string(), dir));
   h->person_id_ = options.person_id;
   h->smpl_ = options.smpl;
@@ -132,22 +142,28 @@ void EasyMocapSequence::read_calibration(CalibrationCheck check) {
   const cv::FileStorage intri = open_storage(intri_file), extri = open_storage(extri_file);
   camera_names_ = read_names(intri, intri_file);
   if (!extri["names"].empty() && read_names(extri, extri_file) != camera_names_)
-    fail("'", extri_file.string(), "' and '", intri_file.string(), "' list different cameras in 'names'");
+    fail("'", extri_file.string(), "' and '", intri_file.string(),
+         "' list different cameras in 'names'");
   for (const std::string& c : camera_names_) {
     Camera cam;
     cam.K = read_matrix(intri, intri_file, "K_" + c, {{3, 3}});
     cam.D = read_matrix(intri, intri_file, "dist_" + c, {{1, 5}, {5, 1}}).reshape({5, 1});
     const bool has_rot = !extri["Rot_" + c].empty(), has_r = !extri["R_" + c].empty();
-    if (!has_rot && !has_r) fail("'", extri_file.string(), "' has neither 'Rot_", c, "' nor 'R_", c, "'");
-    if (has_r) cam.R = geometry::rodrigues(read_matrix(extri, extri_file, "R_" + c, {{3, 1}, {1, 3}}).reshape({3}));
+    if (!has_rot && !has_r)
+      fail("'", extri_file.string(), "' has neither 'Rot_", c, "' nor 'R_", c, "'");
+    if (has_r)
+      cam.R = geometry::rodrigues(
+          read_matrix(extri, extri_file, "R_" + c, {{3, 1}, {1, 3}}).reshape({3}));
     if (has_rot) {
       const torch::Tensor rot = read_matrix(extri, extri_file, "Rot_" + c, {{3, 3}});
       if (has_r) {
         const double diff = (rot - cam.R).abs().max().item<double>();
         if (diff > kRotationAgreement) {
-          const std::string message = "'" + extri_file.string() + "': 'R_" + c + "' (Rodrigues) and 'Rot_" + c +
-                                      "' disagree by " + std::to_string(diff) + " (Rot_" + c + " is used)";
-          if (check == CalibrationCheck::error) fail(message, " (data.calibration_check: warn to go on anyway)");
+          const std::string message = "'" + extri_file.string() + "': 'R_" + c +
+                                      "' (Rodrigues) and 'Rot_" + c + "' disagree by " +
+                                      std::to_string(diff) + " (Rot_" + c + " is used)";
+          if (check == CalibrationCheck::error)
+            fail(message, " (data.calibration_check: warn to go on anyway)");
           spdlog::warn("{} (data.calibration_check: warn; going on)", message);
         }
       }
@@ -165,18 +181,22 @@ void EasyMocapSequence::list_images() {
     const fs::path folder = images / c;
     std::error_code ec;
     if (!fs::is_directory(folder, ec))
-      fail("folder '", folder.string(), "' is missing (camera '", c, "' of '", (dir() / "intri.yml").string(), "')");
+      fail("folder '", folder.string(), "' is missing (camera '", c, "' of '",
+           (dir() / "intri.yml").string(), "')");
     std::map<int, std::string> by_number;
     for (const auto& entry : fs::directory_iterator(folder)) {
       if (!is_image(entry.path())) continue;
       const std::string file = entry.path().filename().string();
       const int number = frame_number_of(file);
       if (number < 0)
-        fail("image '", entry.path().string(), "': EasyMocap's images are named by frame number (000000.jpg)");
+        fail("image '", entry.path().string(),
+             "': EasyMocap's images are named by frame number (000000.jpg)");
       if (!by_number.emplace(number, file).second)
-        fail("'", folder.string(), "' holds two images of frame ", number, ": '", by_number[number], "' and '", file, "'");
+        fail("'", folder.string(), "' holds two images of frame ", number, ": '", by_number[number],
+             "' and '", file, "'");
     }
-    if (by_number.empty()) fail("folder '", folder.string(), "' holds no images (.jpg, .jpeg, .png)");
+    if (by_number.empty())
+      fail("folder '", folder.string(), "' holds no images (.jpg, .jpeg, .png)");
     per_camera.push_back(std::move(by_number));
   }
   for (const auto& [number, file] : per_camera.front()) {
@@ -186,9 +206,10 @@ void EasyMocapSequence::list_images() {
     for (size_t c = 0; c < per_camera.size(); ++c) {
       const auto it = per_camera[c].find(number);
       if (it == per_camera[c].end())
-        fail("'", (images / camera_names_[c] / file).string(), "' is missing: camera '", camera_names_.front(),
-             "' has frame ", number, " but camera '", camera_names_[c], "' has not (", per_camera[c].size(), " images against ",
-             per_camera.front().size(), ")");
+        fail("'", (images / camera_names_[c] / file).string(), "' is missing: camera '",
+             camera_names_.front(), "' has frame ", number, " but camera '", camera_names_[c],
+             "' has not (", per_camera[c].size(), " images against ", per_camera.front().size(),
+             ")");
       f.image_names.push_back(it->second);
     }
     frames_.push_back(std::move(f));
@@ -196,13 +217,15 @@ void EasyMocapSequence::list_images() {
   for (size_t c = 1; c < per_camera.size(); ++c)
     for (const auto& [number, file] : per_camera[c])
       if (!per_camera.front().count(number))
-        fail("'", (images / camera_names_.front() / file).string(), "' is missing: camera '", camera_names_[c],
-             "' has frame ", number, " but camera '", camera_names_.front(), "' has not");
+        fail("'", (images / camera_names_.front() / file).string(), "' is missing: camera '",
+             camera_names_[c], "' has frame ", number, " but camera '", camera_names_.front(),
+             "' has not");
 }
 
 void EasyMocapSequence::check_frame(int frame) const {
   if (frame < 0 || frame >= num_frames())
-    fail(name(), ": frame ", frame, " does not exist (", num_frames(), " frames in '", (dir() / "images").string(), "')");
+    fail(name(), ": frame ", frame, " does not exist (", num_frames(), " frames in '",
+         (dir() / "images").string(), "')");
 }
 
 fs::path EasyMocapSequence::image_path(int frame, int cam) const {
@@ -222,8 +245,9 @@ BodyParams EasyMocapSequence::load_params(int frame) const {
   std::error_code ec;
   if (!fs::exists(file, ec)) file = dir() / "smpl" / file_name;
   if (!fs::exists(file, ec))
-    fail("'", (dir() / "output" / "smpl" / file_name).string(), "' is missing (nor is there '", file.string(),
-         "'): EasyMocap's multi-view SMPL fit of frame ", frames_[size_t(frame)].number);
+    fail("'", (dir() / "output" / "smpl" / file_name).string(), "' is missing (nor is there '",
+         file.string(), "'): EasyMocap's multi-view SMPL fit of frame ",
+         frames_[size_t(frame)].number);
   refuse_special_file(file, "SMPL parameters");
   nlohmann::json people;
   try {
@@ -233,32 +257,41 @@ BodyParams EasyMocapSequence::load_params(int frame) const {
     fail("'", file.string(), "' is not valid JSON: ", e.what());
   }
   if (people.is_object()) people = nlohmann::json::array({people});
-  if (!people.is_array()) fail("'", file.string(), "' must hold a list of people, not ", people.type_name());
-  if (people.empty()) fail("'", file.string(), "' lists no person (was the fit of this frame lost?)");
+  if (!people.is_array())
+    fail("'", file.string(), "' must hold a list of people, not ", people.type_name());
+  if (people.empty())
+    fail("'", file.string(), "' lists no person (was the fit of this frame lost?)");
   std::vector<int64_t> ids;
   for (size_t i = 0; i < people.size(); ++i) {
     const auto& p = people[i];
-    if (!p.is_object()) fail("'", file.string(), "': person [", i, "] is ", p.type_name(), ", not an object");
-    ids.push_back(p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>() : int64_t(i));
+    if (!p.is_object())
+      fail("'", file.string(), "': person [", i, "] is ", p.type_name(), ", not an object");
+    ids.push_back(p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>()
+                                                                  : int64_t(i));
   }
   std::string found;
   for (const auto id : ids) found += (found.empty() ? "" : ", ") + std::to_string(id);
   size_t pick = 0;
   if (person_id_ < 0) {
     if (people.size() > 1)
-      fail("'", file.string(), "' holds ", people.size(), " people (ids ", found, "): set data.person_id to one of them");
+      fail("'", file.string(), "' holds ", people.size(), " people (ids ", found,
+           "): set data.person_id to one of them");
   } else {
     const auto it = std::find(ids.begin(), ids.end(), int64_t(person_id_));
-    if (it == ids.end()) fail("'", file.string(), "' has no person with id ", person_id_, " (data.person_id; ids: ", found, ")");
+    if (it == ids.end())
+      fail("'", file.string(), "' has no person with id ", person_id_,
+           " (data.person_id; ids: ", found, ")");
     pick = size_t(it - ids.begin());
   }
   const auto& p = people[pick];
   const std::string who = "person id " + std::to_string(ids[pick]);
-  BodyParams params{field(p, "poses", body::kNumPoseParams, file, who), field(p, "Rh", 3, file, who),
-                    field(p, "Th", 3, file, who), field(p, "shapes", 0, file, who)};
+  BodyParams params{field(p, "poses", body::kNumPoseParams, file, who),
+                    field(p, "Rh", 3, file, who), field(p, "Th", 3, file, who),
+                    field(p, "shapes", 0, file, who)};
   if (params.shapes.numel() > smpl_->num_betas())
-    fail("'", file.string(), "': ", who, "'s 'shapes' has ", params.shapes.numel(), " values but the body model has ",
-         smpl_->num_betas(), " shape directions (is data.smpl_model the model of this fit?)");
+    fail("'", file.string(), "': ", who, "'s 'shapes' has ", params.shapes.numel(),
+         " values but the body model has ", smpl_->num_betas(),
+         " shape directions (is data.smpl_model the model of this fit?)");
   return params;
 }
 
@@ -280,12 +313,13 @@ cv::Mat EasyMocapSequence::load_mask(int frame, int cam) const {
     if (!fs::exists(path, ec)) continue;
     cv::Mat m = read_image(path, cv::IMREAD_GRAYSCALE) != 0;
     if (!mask.empty() && m.size() != mask.size())
-      fail("'", path.string(), "' is ", m.cols, "x", m.rows, " but '", tried[0].string(), "' is ", mask.cols, "x", mask.rows);
+      fail("'", path.string(), "' is ", m.cols, "x", m.rows, " but '", tried[0].string(), "' is ",
+           mask.cols, "x", mask.rows);
     mask = mask.empty() ? m : (mask | m);
   }
   if (mask.empty())
-    fail("no mask for '", image.string(), "': neither '", tried[0].string(), "' nor '", tried[1].string(),
-         "' exists (non-zero pixels mark the person; docs/YOUR_CAPTURE.md)");
+    fail("no mask for '", image.string(), "': neither '", tried[0].string(), "' nor '",
+         tried[1].string(), "' exists (non-zero pixels mark the person; docs/YOUR_CAPTURE.md)");
   return mask / 255;
 }
 

@@ -27,7 +27,8 @@ namespace th::data {
 class EasyMocapSequence final : public HumanSequence {
  public:
   // Reads intri.yml and extri.yml and lists images/. Throws th::Error naming the file and key.
-  static std::shared_ptr<EasyMocapSequence> open(const std::filesystem::path& dir, const OpenOptions& options);
+  static std::shared_ptr<EasyMocapSequence> open(const std::filesystem::path& dir,
+                                                 const OpenOptions& options);
 
   const char* layout() const override { return "easymocap"; }
   std::filesystem::path calibration_file() const override { return dir() / "extri.yml"; }
@@ -40,15 +41,16 @@ class EasyMocapSequence final : public HumanSequence {
   cv::Mat load_mask(int frame, int camera) const override;
 
  private:
-  EasyMocapSequence(std::string name, std::filesystem::path dir) : HumanSequence(std::move(name), std::move(dir)) {}
+  EasyMocapSequence(std::string name, std::filesystem::path dir)
+      : HumanSequence(std::move(name), std::move(dir)) {}
   void read_calibration(CalibrationCheck check);
   void list_images();
   void check_frame(int frame) const;
 
   struct Frame {
     int number = 0;
-    std::string stem;                     // the file name without extension, e.g. 000012
-    std::vector<std::string> image_names; // per camera, e.g. 000012.jpg
+    std::string stem;                      // the file name without extension, e.g. 000012
+    std::vector<std::string> image_names;  // per camera, e.g. 000012.jpg
   };
   std::vector<Frame> frames_;
   int person_id_ = -1;

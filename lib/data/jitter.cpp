@@ -1,8 +1,7 @@
 #include "data/jitter.hpp"
 
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
+#include <opencv2/imgproc.hpp>
 
 namespace th::data {
 namespace {

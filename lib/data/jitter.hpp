@@ -3,9 +3,8 @@
 // torchvision's ColorJitter, with one set of parameters shared by the target and all reference
 // views of a sample.
 
-#include <opencv2/core.hpp>
-
 #include <array>
+#include <opencv2/core.hpp>
 #include <random>
 
 #include "core/config.hpp"

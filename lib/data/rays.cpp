@@ -1,8 +1,7 @@
 #include "data/rays.hpp"
 
-#include <opencv2/imgproc.hpp>
-
 #include <limits>
+#include <opencv2/imgproc.hpp>
 
 #include "core/error.hpp"
 #include "geometry/camera.hpp"
@@ -41,7 +40,8 @@ RayBundle pixel_rays(const torch::Tensor& pixels, const torch::Tensor& K, const 
   return {origin.reshape({1, 3}).expand({pixels.size(0), 3}).contiguous(), dirs};
 }
 
-NearFar near_far(const torch::Tensor& origins, const torch::Tensor& dirs, const torch::Tensor& box) {
+NearFar near_far(const torch::Tensor& origins, const torch::Tensor& dirs,
+                 const torch::Tensor& box) {
   TORCH_CHECK(origins.dim() == 2 && origins.size(1) == 3, "origins must be (N, 3)");
   TORCH_CHECK(dirs.sizes() == origins.sizes(), "dirs must be (N, 3) like origins");
   TORCH_CHECK(box.sizes() == torch::IntArrayRef({2, 3}), "box must be (2, 3)");

@@ -2,10 +2,10 @@
 // Camera rays, their near/far against the human's box, the 2D box mask and the training patch
 // sampler (METHOD 2.2, 5).
 
-#include <opencv2/core.hpp>
 #include <torch/types.h>
 
 #include <cstdint>
+#include <opencv2/core.hpp>
 #include <random>
 #include <vector>
 

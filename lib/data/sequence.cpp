@@ -1,8 +1,5 @@
 #include "data/sequence.hpp"
 
-#include <opencv2/calib3d.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -11,6 +8,9 @@
 #include <fstream>
 #include <limits>
 #include <numeric>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "core/config_io.hpp"
 #include "core/error.hpp"
@@ -44,7 +44,8 @@ cv::Mat to_unit_float(const cv::Mat& u8) {
   const cv::Mat src = u8.isContinuous() ? u8 : u8.clone();
   const uint8_t* in = src.ptr<uint8_t>();
   float* o = out.ptr<float>();
-  for (size_t i = 0, n = src.total() * src.channels(); i < n; ++i) o[i] = static_cast<float>(in[i]) / 255.0f;
+  for (size_t i = 0, n = src.total() * src.channels(); i < n; ++i)
+    o[i] = static_cast<float>(in[i]) / 255.0f;
   return out;
 }
 
@@ -67,12 +68,14 @@ DataLayout detect_layout(const fs::path& dir) {
   const bool zju = fs::exists(dir / "annots.npy", ec);
   const bool easymocap = fs::exists(dir / "intri.yml", ec) || fs::exists(dir / "extri.yml", ec);
   if (zju && easymocap)
-    fail("'", dir.string(), "' holds both annots.npy (ZJU-MoCap's layout) and intri.yml/extri.yml (EasyMocap's): ",
+    fail("'", dir.string(),
+         "' holds both annots.npy (ZJU-MoCap's layout) and intri.yml/extri.yml (EasyMocap's): ",
          "set data.layout to zju_mocap or easymocap");
   if (zju) return DataLayout::zju_mocap;
   if (easymocap) return DataLayout::easymocap;
   if (!fs::is_directory(dir, ec)) fail("human folder '", dir.string(), "' does not exist");
-  fail("'", dir.string(), "' holds neither annots.npy (ZJU-MoCap's layout) nor intri.yml and extri.yml ",
+  fail("'", dir.string(),
+       "' holds neither annots.npy (ZJU-MoCap's layout) nor intri.yml and extri.yml ",
        "(EasyMocap's layout): is data.root the folder holding one folder per person?");
 }
 
@@ -86,7 +89,8 @@ std::shared_ptr<HumanSequence> open_human(const fs::path& dir, const OpenOptions
   return ZjuMocapSequence::open(dir);
 }
 
-int camera_index(const HumanSequence& human, const std::string& value, const std::string& where, bool index_only) {
+int camera_index(const HumanSequence& human, const std::string& value, const std::string& where,
+                 bool index_only) {
   if (!index_only)
     for (int c = 0; c < human.num_cameras(); ++c)
       if (human.camera_name(c) == value) return c;
@@ -96,14 +100,17 @@ int camera_index(const HumanSequence& human, const std::string& value, const std
     fail(where, ": camera ", value, " does not exist for ", human.name(), " (", human.num_cameras(),
          " cameras, indices 0 to ", human.num_cameras() - 1, ")");
   std::string names;
-  for (int c = 0; c < human.num_cameras() && c < 40; ++c) names += (c ? ", " : "") + human.camera_name(c);
+  for (int c = 0; c < human.num_cameras() && c < 40; ++c)
+    names += (c ? ", " : "") + human.camera_name(c);
   fail(where, ": ", human.name(), " has no camera '", value, "' (its cameras: ", names,
        human.num_cameras() > 40 ? ", ..." : "", ")");
 }
 
-std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor& body_vertices, int count) {
+std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor& body_vertices,
+                                int count) {
   const int n = human.num_cameras();
-  if (count > n) fail(human.name(), ": ", count, " reference views asked for but it has ", n, " cameras");
+  if (count > n)
+    fail(human.name(), ": ", count, " reference views asked for but it has ", n, " cameras");
   if (count == 1) return {0};
   // Camera centres C = -R^T T, relative to the body's centre; the ring's normal is the direction
   // in which the centres vary least.
@@ -126,7 +133,8 @@ std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor&
   const torch::Tensor rel = C - body;
   const auto x = rel.matmul(u_unit), y = rel.matmul(v_unit);
   std::vector<double> azimuth(static_cast<size_t>(n));
-  for (int c = 0; c < n; ++c) azimuth[size_t(c)] = std::atan2(y[c].item<double>(), x[c].item<double>());
+  for (int c = 0; c < n; ++c)
+    azimuth[size_t(c)] = std::atan2(y[c].item<double>(), x[c].item<double>());
 
   // Every subset of `count` cameras (enumerated in lexicographic order, so ties keep the first).
   constexpr double kTwoPi = 6.283185307179586;
@@ -149,7 +157,8 @@ std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor&
   for (;;) {
     double m, q;
     score(pick, m, q);
-    if (m < best_max - kTie || (m < best_max + kTie && q < best_sq - kTie)) best_max = m, best_sq = q, best = pick;
+    if (m < best_max - kTie || (m < best_max + kTie && q < best_sq - kTie))
+      best_max = m, best_sq = q, best = pick;
     // Next combination; beyond a million the search stops with the best found (many cameras).
     if (++visited >= 1000000) break;
     int i = count - 1;
@@ -165,8 +174,8 @@ void require_finite(const torch::Tensor& t, const fs::path& file, const std::str
   const auto bad = (~torch::isfinite(t)).reshape({-1}).nonzero();
   if (bad.numel() > 0) {
     const int64_t i = bad[0][0].item<int64_t>();
-    fail("'", file.string(), "': ", what, " holds ", t.reshape({-1})[i].item<double>(), " at index ", i,
-         " (", bad.size(0), " non-finite value", bad.size(0) > 1 ? "s" : "", ")");
+    fail("'", file.string(), "': ", what, " holds ", t.reshape({-1})[i].item<double>(),
+         " at index ", i, " (", bad.size(0), " non-finite value", bad.size(0) > 1 ? "s" : "", ")");
   }
 }
 
@@ -175,7 +184,8 @@ cv::Mat read_image(const fs::path& path, int flags) {
   cv::Mat img = cv::imread(path.string(), flags);
   if (img.empty()) fail("cannot read image '", path.string(), "' (missing or corrupt)");
   std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   if ((ext == ".jpg" || ext == ".jpeg") && jpeg_truncated(path))
     fail("image '", path.string(), "' is truncated (no JPEG end marker)");
   return img;

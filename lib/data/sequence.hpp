@@ -4,11 +4,11 @@
 // each frame. Two layouts are read: ZJU-MoCap's (data/zju_mocap.hpp; H36M as preprocessed by
 // Animatable NeRF too) and EasyMocap's (data/easymocap.hpp), the one own captures come in.
 
-#include <opencv2/core.hpp>
 #include <torch/types.h>
 
 #include <filesystem>
 #include <memory>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 
@@ -64,7 +64,8 @@ class HumanSequence {
   virtual cv::Mat load_mask(int frame, int camera) const = 0;
 
  protected:
-  HumanSequence(std::string name, std::filesystem::path dir) : name_(std::move(name)), dir_(std::move(dir)) {}
+  HumanSequence(std::string name, std::filesystem::path dir)
+      : name_(std::move(name)), dir_(std::move(dir)) {}
   std::vector<Camera> cameras_;
   std::vector<std::string> camera_names_;
 
@@ -87,7 +88,8 @@ struct OpenOptions {
 // DataLayout::automatic).
 DataLayout detect_layout(const std::filesystem::path& dir);
 // Opens a person's folder in the layout `options` names (automatic: detect_layout, logged).
-std::shared_ptr<HumanSequence> open_human(const std::filesystem::path& dir, const OpenOptions& options);
+std::shared_ptr<HumanSequence> open_human(const std::filesystem::path& dir,
+                                          const OpenOptions& options);
 
 // A camera by name or index. `value` is a camera's name where one is called that, otherwise a
 // decimal integer is a calibration index (data.reference_views, --reference-views); with
@@ -101,26 +103,28 @@ int camera_index(const HumanSequence& human, const std::string& value, const std
 // fit through the camera centres; of all sets of `count` cameras the one whose largest angular gap
 // between neighbours is smallest wins, ties to the smaller sum of squared gaps, then to the
 // smaller indices. count 1: camera 0. Returned in increasing index order.
-std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor& body_vertices, int count);
+std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor& body_vertices,
+                                int count);
 
 // Reads an image, refusing special files, unreadable and truncated (JPEG without its end marker)
 // ones, naming the path.
 cv::Mat read_image(const std::filesystem::path& path, int flags);
 // Every value of `t` finite, else an error naming the file, `what` and the first offender.
-void require_finite(const torch::Tensor& t, const std::filesystem::path& file, const std::string& what);
+void require_finite(const torch::Tensor& t, const std::filesystem::path& file,
+                    const std::string& what);
 
 // One view after METHOD 2.1: undistorted, resized by `ratio`, background black.
 struct ViewImage {
-  cv::Mat rgb;   // CV_32FC3, RGB in [0, 1]
+  cv::Mat rgb;  // CV_32FC3, RGB in [0, 1]
   // CV_8U: 0 background, 1 person, 100 border band (target views only). With the band marked
   // before undistortion [parity], edge pixels hold bilinear blends of 0, 1 and 100.
   cv::Mat mask;
-  Camera camera; // K scaled by ratio (no half-pixel shift), T in metres
+  Camera camera;  // K scaled by ratio (no half-pixel shift), T in metres
 };
 
 struct ViewOptions {
   double ratio = 0.5;
-  bool border_band = false;         // target views: mark dilate5x5 - erode5x5 with 100
+  bool border_band = false;  // target views: mark dilate5x5 - erode5x5 with 100
   const JitterParams* jitter = nullptr;
   // METHOD 2.1 step 6 [parity]: the band is marked on the distorted mask, which is then undistorted
   // (bilinear); false: marked on the undistorted mask (a clean 0/1/100 mask).

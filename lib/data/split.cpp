@@ -17,7 +17,8 @@ namespace {
 
 YAML::Node load_settings(const std::filesystem::path& file) {
   refuse_special_file(file, "split file");
-  if (!std::filesystem::is_regular_file(file)) fail("split file '", file.string(), "' does not exist");
+  if (!std::filesystem::is_regular_file(file))
+    fail("split file '", file.string(), "' does not exist");
   YAML::Node root;
   try {
     root = YAML::LoadFile(file.string());
@@ -34,7 +35,8 @@ T get(const YAML::Node& node, const char* key, const std::string& where) {
   if (!node[key]) fail(where, ": missing '", key, "'");
   if constexpr (std::is_same_v<T, int>) {
     // Decimal, as every integer of a config ("010" is ten, not yaml-cpp's octal eight).
-    const auto v = node[key].IsScalar() ? config::decimal_integer(node[key].Scalar()) : std::nullopt;
+    const auto v =
+        node[key].IsScalar() ? config::decimal_integer(node[key].Scalar()) : std::nullopt;
     if (!v || *v < std::numeric_limits<int>::min() || *v > std::numeric_limits<int>::max())
       fail(where, ": '", key, "' must be a decimal integer");
     return int(*v);
@@ -55,7 +57,8 @@ void check_person_name(const std::string& name, const std::string& where) {
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
       char code[8];
       std::snprintf(code, sizeof code, "0x%02x", static_cast<unsigned char>(c));
-      fail(where, ": the person's name holds a control character (", code, "); names are folder names without them");
+      fail(where, ": the person's name holds a control character (", code,
+           "); names are folder names without them");
     }
   if (name.empty()) fail(where, ": the person's name is empty");
   if (std::string("=+-@").find(name.front()) != std::string::npos)
@@ -70,7 +73,8 @@ bool read_views(const YAML::Node& node, const char* key, const char* keyword,
   const YAML::Node v = node[key];
   if (!v) fail(where, ": missing '", key, "'");
   if (v.IsScalar() && v.Scalar() == keyword) return true;
-  if (!v.IsSequence()) fail(where, ": '", key, "' must be a list of cameras (indices or names) or '", keyword, "'");
+  if (!v.IsSequence())
+    fail(where, ": '", key, "' must be a list of cameras (indices or names) or '", keyword, "'");
   views.clear();
   for (const auto& item : v) {
     if (!item.IsScalar() || item.Scalar().empty())
@@ -103,7 +107,8 @@ SplitSetting load_split(const std::filesystem::path& file, const std::string& na
   const YAML::Node node = settings[name];
   if (!node) {
     std::string known;
-    for (const auto& kv : settings) known += (known.empty() ? "" : ", ") + kv.first.as<std::string>();
+    for (const auto& kv : settings)
+      known += (known.empty() ? "" : ", ") + kv.first.as<std::string>();
     fail("split file '", file.string(), "' has no setting '", name, "' (it has: ", known, ")");
   }
   const std::string where = "split file '" + file.string() + "', setting '" + name + "'";
@@ -138,8 +143,8 @@ SplitSetting load_split(const std::filesystem::path& file, const std::string& na
   return s;
 }
 
-SplitSetting whole_capture_setting(const std::filesystem::path& root, const std::string& name, bool training,
-                                   int num_reference_views) {
+SplitSetting whole_capture_setting(const std::filesystem::path& root, const std::string& name,
+                                   bool training, int num_reference_views) {
   namespace fs = std::filesystem;
   std::error_code ec;
   if (!fs::is_directory(root, ec)) fail("data.root '", root.string(), "' does not exist");
@@ -154,13 +159,14 @@ SplitSetting whole_capture_setting(const std::filesystem::path& root, const std:
     const fs::path dir = entry.path();
     if (!entry.is_directory(ec)) continue;
     // What data::detect_layout reads (either calibration file: the reader names the other).
-    if (fs::exists(dir / "annots.npy", ec) || fs::exists(dir / "intri.yml", ec) || fs::exists(dir / "extri.yml", ec) ||
-        fs::exists(dir / "Posing" / "annots.npy", ec))
+    if (fs::exists(dir / "annots.npy", ec) || fs::exists(dir / "intri.yml", ec) ||
+        fs::exists(dir / "extri.yml", ec) || fs::exists(dir / "Posing" / "annots.npy", ec))
       people.push_back(dir.filename().string());
   }
   std::sort(people.begin(), people.end());
   if (people.empty())
-    fail("data.root '", root.string(), "' holds no person's folder (one with annots.npy, or intri.yml and extri.yml), ",
+    fail("data.root '", root.string(),
+         "' holds no person's folder (one with annots.npy, or intri.yml and extri.yml), ",
          "and data.split_file is empty");
   for (const auto& p : people) {
     check_person_name(p, "data.root '" + root.string() + "'");

@@ -15,7 +15,9 @@ namespace th::data {
 struct CameraRef {
   std::string text;
   bool index = false;
-  bool operator==(const CameraRef& other) const { return text == other.text && index == other.index; }
+  bool operator==(const CameraRef& other) const {
+    return text == other.text && index == other.index;
+  }
 };
 // As a split file would write it: 7 or "01".
 inline std::ostream& operator<<(std::ostream& out, const CameraRef& ref) {
@@ -33,11 +35,11 @@ struct HumanRange {
 
 struct SplitSetting {
   std::string name;
-  bool random_references = false;   // training: draw references per sample
-  int num_reference_views = 3;      // with random references
+  bool random_references = false;  // training: draw references per sample
+  int num_reference_views = 3;     // with random references
   // Cameras by index or name, resolved per person by data::camera_index (data/sequence.hpp).
-  std::vector<CameraRef> reference_views; // fixed references
-  bool all_targets = false;         // every camera of every frame is a target
+  std::vector<CameraRef> reference_views;   // fixed references
+  bool all_targets = false;                 // every camera of every frame is a target
   bool targets_exclude_references = false;  // with all_targets: every camera but the references
   std::vector<CameraRef> target_views;
   std::vector<HumanRange> humans;
@@ -53,7 +55,7 @@ std::vector<std::string> split_settings(const std::filesystem::path& file);
 // name), every frame; training draws `num_reference_views` references per sample, the other modes
 // leave fixed references to the dataset (data.reference_views, or the cameras most evenly spread
 // around the body) and take every other camera as a target.
-SplitSetting whole_capture_setting(const std::filesystem::path& root, const std::string& name, bool training,
-                                   int num_reference_views);
+SplitSetting whole_capture_setting(const std::filesystem::path& root, const std::string& name,
+                                   bool training, int num_reference_views);
 
 }  // namespace th::data

@@ -1,14 +1,13 @@
 #include "data/zju_mocap.hpp"
 
-#include <opencv2/calib3d.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <cctype>
 #include <cstdio>
 #include <fstream>
 #include <numeric>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -139,8 +138,7 @@ std::optional<fs::path> ZjuMocapSequence::find(const fs::path& relative) const {
       it = folder_index_.emplace(folder, std::move(index)).first;
     }
     auto hit = it->second.find(number);
-    if (hit != it->second.end() &&
-        fs::path(hit->second).extension() == relative.extension())
+    if (hit != it->second.end() && fs::path(hit->second).extension() == relative.extension())
       return folder / hit->second;
   }
   return std::nullopt;
@@ -171,7 +169,8 @@ fs::path ZjuMocapSequence::body_file(const char* kind, const char* legacy, int f
 BodyParams ZjuMocapSequence::load_params(int frame) const {
   const fs::path file = body_file("new_params", "params", frame);
   const io::Value dict = io::read_npy_value(file);
-  if (dict.kind() != io::Value::Kind::Dict) fail("'", file.string(), "' must hold a dict, not ", dict.type_name());
+  if (dict.kind() != io::Value::Kind::Dict)
+    fail("'", file.string(), "' must hold a dict, not ", dict.type_name());
   return {flat_f64(dict, "poses", 72, file), flat_f64(dict, "Rh", 3, file),
           flat_f64(dict, "Th", 3, file), flat_f64(dict, "shapes", 0, file)};
 }
@@ -198,11 +197,13 @@ cv::Mat ZjuMocapSequence::load_mask(int frame, int cam) const {
     cv::Mat m = read_image(*p, cv::IMREAD_GRAYSCALE);
     m = m != 0;
     if (!mask.empty() && m.size() != mask.size())
-      fail("'", p->string(), "' is ", m.cols, "x", m.rows, " but '", tried[0], "' is ", mask.cols, "x", mask.rows);
+      fail("'", p->string(), "' is ", m.cols, "x", m.rows, " but '", tried[0], "' is ", mask.cols,
+           "x", mask.rows);
     mask = mask.empty() ? m : (mask | m);
   }
   if (mask.empty())
-    fail("no mask for '", ims_[frame][cam], "': neither '", tried[0], "' nor '", tried[1], "' exists");
+    fail("no mask for '", ims_[frame][cam], "': neither '", tried[0], "' nor '", tried[1],
+         "' exists");
   return mask / 255;  // 0/1
 }
 
@@ -210,8 +211,10 @@ fs::path visibility_file(const fs::path& root, const HumanSequence& human, int f
   const fs::path image = fs::relative(human.image_path(frame, cam), human.dir());
   const std::string stem = image.stem().string();
   const int number = frame_number_of(image.filename().string());
-  if (number < 0) fail(human.name(), ": cannot read a frame number from image name '", image.string(), "'");
-  const bool digits = !stem.empty() && std::all_of(stem.begin(), stem.end(), [](unsigned char c) { return std::isdigit(c); });
+  if (number < 0)
+    fail(human.name(), ": cannot read a frame number from image name '", image.string(), "'");
+  const bool digits = !stem.empty() && std::all_of(stem.begin(), stem.end(),
+                                                   [](unsigned char c) { return std::isdigit(c); });
   const int width = digits ? int(stem.size()) : 4;
   char name[32];
   std::snprintf(name, sizeof name, "%0*d.npy", width, number);

@@ -1,6 +1,7 @@
 #pragma once
-// ZJU-MoCap as users download it (METHOD 1.1), read straight from its folder layout. H36M (Animatable NeRF's preprocessing) has the same
-// layout per subject and is read by the same code (data/h36m.hpp).
+// ZJU-MoCap as users download it (METHOD 1.1), read straight from its folder layout. H36M
+// (Animatable NeRF's preprocessing) has the same layout per subject and is read by the same code
+// (data/h36m.hpp).
 //
 // A human's folder holds:
 //   annots.npy                          cams {K, R, T (mm), D} per camera, ims[frame]['ims']
@@ -41,7 +42,8 @@ class ZjuMocapSequence final : public HumanSequence {
   cv::Mat load_mask(int frame, int camera) const override;
 
  private:
-  ZjuMocapSequence(std::string name, std::filesystem::path dir) : HumanSequence(std::move(name), std::move(dir)) {}
+  ZjuMocapSequence(std::string name, std::filesystem::path dir)
+      : HumanSequence(std::move(name), std::move(dir)) {}
   // A file listed relative to the human's folder, also under the renamed/original name of the
   // same frame number; resolve throws naming the path where find returns nothing.
   std::filesystem::path resolve(const std::filesystem::path& relative) const;

@@ -1,6 +1,7 @@
 #include "dist/communicator.hpp"
 
 #include <spdlog/spdlog.h>
+
 #include <torch/csrc/distributed/c10d/PrefixStore.hpp>
 #include <torch/csrc/distributed/c10d/ProcessGroupGloo.hpp>
 #include <torch/csrc/distributed/c10d/TCPStore.hpp>
@@ -32,7 +33,8 @@ using Clock = std::chrono::steady_clock;
 int env_int(const char* name, const char* value, int lo, int hi) {
   const auto v = config::decimal_integer(value);
   if (!v || *v < lo || *v > hi)
-    fail("environment variable ", name, "='", value, "' must be an integer in [", lo, ", ", hi, "]");
+    fail("environment variable ", name, "='", value, "' must be an integer in [", lo, ", ", hi,
+         "]");
   return int(*v);
 }
 
@@ -68,7 +70,8 @@ std::optional<Environment> environment_from_env() {
     if (!*addr) fail("environment variable MASTER_ADDR is empty");
     e.master_addr = addr;
   }
-  if (const char* port = std::getenv("MASTER_PORT")) e.master_port = env_int("MASTER_PORT", port, 1, 65535);
+  if (const char* port = std::getenv("MASTER_PORT"))
+    e.master_port = env_int("MASTER_PORT", port, 1, 65535);
   return e;
 }
 
@@ -85,10 +88,12 @@ std::string resolve_backend(const std::string& requested, const torch::Device& d
   if (requested == "nccl") {
     if (!nccl_available())
       fail("train.dist_backend=nccl but this LibTorch was built without NCCL (use gloo or auto)");
-    if (!device.is_cuda()) fail("train.dist_backend=nccl needs device cuda (the device is ", device.str(), ")");
+    if (!device.is_cuda())
+      fail("train.dist_backend=nccl needs device cuda (the device is ", device.str(), ")");
     return "nccl";
   }
-  if (requested != "auto") fail("train.dist_backend='", requested, "' is not one of auto, gloo, nccl");
+  if (requested != "auto")
+    fail("train.dist_backend='", requested, "' is not one of auto, gloo, nccl");
   return nccl_available() && device.is_cuda() ? "nccl" : "gloo";
 }
 
@@ -109,8 +114,12 @@ auto Communicator::guarded(const std::string& what, F&& f) -> decltype(f()) {
 
 Communicator::Communicator(const Environment& env, const std::string& backend,
                            const torch::Device& device, double timeout_s, double bucket_mb)
-    : rank_(env.rank), world_size_(env.world_size), backend_(backend), device_(device),
-      timeout_s_(timeout_s), bucket_bytes_(std::max<int64_t>(1, int64_t(bucket_mb * 1048576.0))) {
+    : rank_(env.rank),
+      world_size_(env.world_size),
+      backend_(backend),
+      device_(device),
+      timeout_s_(timeout_s),
+      bucket_bytes_(std::max<int64_t>(1, int64_t(bucket_mb * 1048576.0))) {
   TORCH_CHECK(world_size_ >= 1 && rank_ >= 0 && rank_ < world_size_, "Communicator: rank ", rank_,
               " of ", world_size_);
   TORCH_CHECK(backend_ == "gloo" || backend_ == "nccl", "Communicator: backend ", backend_);
@@ -126,7 +135,8 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
   so.timeout = timeout;
   compat::use_classic_tcpstore(so, 0);
   const std::string where = "rank " + std::to_string(rank_) + " of " + std::to_string(world_size_) +
-                            ": rendezvous at " + env.master_addr + ":" + std::to_string(env.master_port);
+                            ": rendezvous at " + env.master_addr + ":" +
+                            std::to_string(env.master_port);
   // The store's own timeout does not bound every wait (a port held by another program that
   // accepts the connection and never answers keeps the client waiting), so the rendezvous runs
   // on a thread of its own, given up after the timeout (the process then exits with the error).
@@ -144,7 +154,8 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
     failed_ = true;
     fail(where, " got no answer within ", timeout_s, " s",
          rank_ == 0 ? " (did every rank start?)"
-                    : " (is MASTER_PORT rank 0's? another program there accepts connections but does not answer)");
+                    : " (is MASTER_PORT rank 0's? another program there accepts connections but "
+                      "does not answer)");
   }
   try {
     store_ = store.get();
@@ -175,12 +186,14 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
         options->devices.push_back(c10d::ProcessGroupGloo::createDeviceForHostname("127.0.0.1"));
       else
         options->devices.push_back(c10d::ProcessGroupGloo::createDefaultDevice());
-      group_ = c10::make_intrusive<c10d::ProcessGroupGloo>(group_store, rank_, world_size_, options);
+      group_ =
+          c10::make_intrusive<c10d::ProcessGroupGloo>(group_store, rank_, world_size_, options);
     } else {
 #ifdef USE_C10D_NCCL
       auto options = c10d::ProcessGroupNCCL::Options::create();
       options->timeout = timeout;
-      group_ = c10::make_intrusive<c10d::ProcessGroupNCCL>(group_store, rank_, world_size_, options);
+      group_ =
+          c10::make_intrusive<c10d::ProcessGroupNCCL>(group_store, rank_, world_size_, options);
 #else
       fail("this LibTorch has no NCCL process group");
 #endif
@@ -194,7 +207,8 @@ Communicator::Communicator(const Environment& env, const std::string& backend,
 Communicator::~Communicator() {
   if (std::uncaught_exceptions() > 0) {  // (a constructor that threw runs no destructor)
     try {
-      announce("rank " + std::to_string(rank_) + " stopped with an error (its own message is on its stderr)");
+      announce("rank " + std::to_string(rank_) +
+               " stopped with an error (its own message is on its stderr)");
     } catch (...) {
       // the store is gone (rank 0 has exited): nobody is left to tell
     }
@@ -397,10 +411,12 @@ void Communicator::sharded(const std::vector<std::vector<int64_t>>& assignment,
                            const std::function<std::string(int64_t)>& work,
                            const std::function<void(int64_t, const std::string&)>& collect,
                            const std::function<void()>& finish, const std::string& what) {
-  TORCH_CHECK(int(assignment.size()) == world_size_, "sharded: ", assignment.size(), " assignments for ",
-              world_size_, " ranks");
+  TORCH_CHECK(int(assignment.size()) == world_size_, "sharded: ", assignment.size(),
+              " assignments for ", world_size_, " ranks");
   const std::string tag = "shard/" + std::to_string(shard_calls_++) + "/";
-  auto result_key = [&](int r, size_t j) { return tag + std::to_string(r) + "/" + std::to_string(j); };
+  auto result_key = [&](int r, size_t j) {
+    return tag + std::to_string(r) + "/" + std::to_string(j);
+  };
   const auto& mine = assignment[size_t(rank_)];
   const auto timeout = std::chrono::duration<double>(timeout_s_);
 
@@ -424,12 +440,13 @@ void Communicator::sharded(const std::vector<std::vector<int64_t>>& assignment,
               }
               if (store_->check({failure_key(r)})) {
                 const auto v = store_->get(failure_key(r));
-                fail("rank ", r, " of ", world_size_, " failed during ", what, ": ", std::string(v.begin(), v.end()));
+                fail("rank ", r, " of ", world_size_, " failed during ", what, ": ",
+                     std::string(v.begin(), v.end()));
               }
               if (!wait) return false;
               if (Clock::now() - since > timeout)
-                fail("rank ", r, " of ", world_size_, " sent no result of ", what, " for ", timeout_s_,
-                     " s: it died or hung (train.dist_timeout_s)");
+                fail("rank ", r, " of ", world_size_, " sent no result of ", what, " for ",
+                     timeout_s_, " s: it died or hung (train.dist_timeout_s)");
               std::this_thread::sleep_for(std::chrono::milliseconds(20));
             }
           };

@@ -6,13 +6,13 @@
 // Every collective is bounded by the timeout: a rank that dies or hangs makes the others throw
 // th::Error (naming the operation and the timeout) instead of waiting forever.
 
-#include <torch/csrc/distributed/c10d/Store.hpp>
 #include <torch/types.h>
 
 #include <functional>
 #include <memory>
 #include <optional>
 #include <string>
+#include <torch/csrc/distributed/c10d/Store.hpp>
 #include <vector>
 
 #include "core/torch_compat.hpp"
@@ -31,8 +31,8 @@ struct Environment {
 };
 
 // Reads RANK, WORLD_SIZE, LOCAL_RANK (default: RANK), LOCAL_WORLD_SIZE (default 1), MASTER_ADDR
-// (default 127.0.0.1) and MASTER_PORT (default 29500); numbers in decimal. nullopt when WORLD_SIZE is not set. Throws th::Error naming the
-// variable when a value is malformed or out of range.
+// (default 127.0.0.1) and MASTER_PORT (default 29500); numbers in decimal. nullopt when WORLD_SIZE
+// is not set. Throws th::Error naming the variable when a value is malformed or out of range.
 std::optional<Environment> environment_from_env();
 
 // Which c10d backend a run uses: "gloo" or "nccl" for `requested` (auto | gloo | nccl) on `device`.
@@ -105,7 +105,8 @@ class Communicator {
   double allreduce_seconds_last() const { return allreduce_last_; }
 
  private:
-  template <class F> auto guarded(const std::string& what, F&& f) -> decltype(f());
+  template <class F>
+  auto guarded(const std::string& what, F&& f) -> decltype(f());
   torch::Tensor to_comm(const torch::Tensor& t) const;  // where the backend wants the tensor
 
   int rank_, world_size_;
@@ -115,7 +116,7 @@ class Communicator {
   int64_t bucket_bytes_;
   c10::intrusive_ptr<c10d::Store> store_;
   c10::intrusive_ptr<compat::CollectiveGroup> group_;  // Gloo or NCCL
-  bool failed_ = false;     // after a failed collective the group is left alone (not torn down)
+  bool failed_ = false;      // after a failed collective the group is left alone (not torn down)
   int64_t lead_calls_ = 0;   // on_lead sequence number (store keys)
   int64_t shard_calls_ = 0;  // sharded sequence number (store keys)
   double allreduce_total_ = 0, allreduce_last_ = 0;

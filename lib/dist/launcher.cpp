@@ -103,7 +103,8 @@ class ForwardSignals {
     for (size_t i = 0; i < std::size(kSignals); ++i) ::sigaction(kSignals[i], &sa, &previous_[i]);
   }
   ~ForwardSignals() {
-    for (size_t i = 0; i < std::size(kSignals); ++i) ::sigaction(kSignals[i], &previous_[i], nullptr);
+    for (size_t i = 0; i < std::size(kSignals); ++i)
+      ::sigaction(kSignals[i], &previous_[i], nullptr);
   }
   ForwardSignals(const ForwardSignals&) = delete;
   ForwardSignals& operator=(const ForwardSignals&) = delete;
@@ -280,8 +281,8 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o,
   for (int r = 0; r < o.nproc; ++r) {
     // The environment is built before fork: the child only calls async-signal-safe functions.
     std::vector<std::string> env_strings;
-    const char* replaced[] = {"RANK=", "LOCAL_RANK=", "WORLD_SIZE=", "LOCAL_WORLD_SIZE=", "MASTER_ADDR=",
-                              "MASTER_PORT="};
+    const char* replaced[] = {
+        "RANK=", "LOCAL_RANK=", "WORLD_SIZE=", "LOCAL_WORLD_SIZE=", "MASTER_ADDR=", "MASTER_PORT="};
     for (char** e = environ; *e; ++e) {
       bool keep = true;
       for (const char* k : replaced) keep = keep && std::strncmp(*e, k, std::strlen(k)) != 0;
@@ -296,7 +297,8 @@ int launch_local(const std::vector<std::string>& args, const LaunchOptions& o,
     std::vector<char*> envp;
     for (auto& e : env_strings) envp.push_back(e.data());
     envp.push_back(nullptr);
-    const std::string exec_error = "cannot start worker " + std::to_string(r) + " (" + args[0] + ")\n";
+    const std::string exec_error =
+        "cannot start worker " + std::to_string(r) + " (" + args[0] + ")\n";
     ErrorChannel channel;
     try {
       channel = open_channel(terminal && r == 0);

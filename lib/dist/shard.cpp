@@ -11,10 +11,12 @@ namespace th::dist {
 std::vector<std::vector<int64_t>> balance(const std::vector<std::vector<int64_t>>& groups,
                                           const std::vector<double>& cost, int ranks) {
   if (ranks < 1) fail("cannot split work over ", ranks, " ranks");
-  if (cost.size() != groups.size()) fail("balance: ", groups.size(), " groups but ", cost.size(), " costs");
+  if (cost.size() != groups.size())
+    fail("balance: ", groups.size(), " groups but ", cost.size(), " costs");
   std::vector<size_t> order(groups.size());
   std::iota(order.begin(), order.end(), size_t(0));
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return cost[a] > cost[b]; });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](size_t a, size_t b) { return cost[a] > cost[b]; });
   std::vector<double> load(size_t(ranks), 0.0);
   std::vector<std::vector<int64_t>> out(static_cast<size_t>(ranks));
   for (const size_t g : order) {
@@ -64,7 +66,8 @@ double Record::number(const char* what) {
 std::string Record::text(const char* what) {
   const int64_t n = int64(what);
   if (n < 0 || uint64_t(n) > bytes_.size() - pos_)
-    fail("a result record's ", what, " claims ", n, " bytes where ", bytes_.size() - pos_, " are left");
+    fail("a result record's ", what, " claims ", n, " bytes where ", bytes_.size() - pos_,
+         " are left");
   std::string s(bytes_.data() + pos_, size_t(n));
   pos_ += size_t(n);
   return s;

@@ -4,8 +4,8 @@
 #include <torch/torch.h>
 
 #include <cmath>
-#include <map>
 #include <fstream>
+#include <map>
 #include <optional>
 #include <sstream>
 
@@ -50,12 +50,16 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
   csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points\n";
   for (const auto& r : s.per_image)
     csv << csv_field(r.human) << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
-        << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ',' << r.points << ','
-        << r.culled_points << ',' << r.evaluated_points << '\n';
+        << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ',' << r.points
+        << ',' << r.culled_points << ',' << r.evaluated_points << '\n';
   io::write_file_atomic(dir / "per_image.csv", csv.str());
   pipeline::JsonLine j;
-  j.add("setting", s.setting).add("images", s.images).add("psnr", s.psnr).add("ssim", s.ssim)
-      .add("lpips", s.lpips).add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
+  j.add("setting", s.setting)
+      .add("images", s.images)
+      .add("psnr", s.psnr)
+      .add("ssim", s.ssim)
+      .add("lpips", s.lpips)
+      .add("lpips_available", std::string(s.lpips_available ? "yes" : "no"))
       .add("seconds_per_image", s.seconds_per_image)
       .add("opaque_rays_1e-3", s.opaque_1e3)
       .add("opaque_rays_1e-4", s.opaque_1e4);
@@ -75,7 +79,8 @@ std::string markdown_table(const std::vector<EvalSummary>& summaries) {
   std::string out = "| setting | images | PSNR | SSIM | LPIPS |\n|---|---|---|---|---|\n";
   for (const auto& s : summaries)
     out += "| " + s.setting + " | " + std::to_string(s.images) + " | " + fmt(s.psnr, 2) + " | " +
-           fmt(s.ssim, 3) + " | " + (s.lpips_available ? fmt(s.lpips, 3) : "n/a (no weights)") + " |\n";
+           fmt(s.ssim, 3) + " | " + (s.lpips_available ? fmt(s.lpips, 3) : "n/a (no weights)") +
+           " |\n";
   return out;
 }
 
@@ -102,31 +107,32 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
                      const fs::path& out_dir, dist::Communicator* comm) {
   const std::string setting = config.eval.setting;
   const auto smpl = data::load_body_model(config.data);
-  auto dataset = std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
+  auto dataset =
+      std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
   model::TransHuman model(config.model);
   pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
   model->to(device);
   model->eval();
   model->set_products(model::select_products(config.precision, config.fp32_products, device));
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
-  const torch::Tensor canonical = smpl->v_template;  // float64: token positions [parity]
+  const torch::Tensor canonical = smpl->v_template;   // float64: token positions [parity]
   pipeline::Tokens tokens(*model, smpl->v_template);  // the checkpoint's token groups
 
   size_t n = dataset->size();
   if (config.eval.limit > 0) n = std::min(n, size_t(config.eval.limit));
   const int ranks = comm ? comm->world_size() : 1, rank = comm ? comm->rank() : 0;
   std::vector<std::pair<int, int>> item_frames;
-  for (size_t i = 0; i < n; ++i) item_frames.emplace_back(dataset->item(i).human, dataset->item(i).frame);
+  for (size_t i = 0; i < n; ++i)
+    item_frames.emplace_back(dataset->item(i).human, dataset->item(i).frame);
   const auto assignment = shard_views(item_frames, config.eval.reuse_frames, ranks);
   const auto& mine = assignment[size_t(rank)];
   std::vector<size_t> order(mine.begin(), mine.end());
-  data::Prefetcher loader(dataset, order, std::vector<uint64_t>(order.size(), 0), config.data.workers,
-                          config.data.prefetch);
+  data::Prefetcher loader(dataset, order, std::vector<uint64_t>(order.size(), 0),
+                          config.data.workers, config.data.prefetch);
   const fs::path image_dir = out_dir / "images";
   const bool writes = !out_dir.empty();
   if (config.eval.save_images && writes) fs::create_directories(image_dir);
-  if (ranks > 1)
-    spdlog::info("eval: {} views over {} ranks ({} here)", n, ranks, mine.size());
+  if (ranks > 1) spdlog::info("eval: {} views over {} ranks ({} here)", n, ranks, mine.size());
 
   // One view: its scores and counts, and its panel's PNG bytes, as a record (sent to rank 0 by
   // the others).
@@ -154,8 +160,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
       }
       imgs.push_back(pipeline::error_map(r.pred, r.gt));
       captions.push_back("|error|");
-      panel = video::encode_png(pipeline::panel(imgs, captions), "the panel of " + s.human + " frame " +
-                                                                     std::to_string(s.frame));
+      panel = video::encode_png(pipeline::panel(imgs, captions),
+                                "the panel of " + s.human + " frame " + std::to_string(s.frame));
     }
     dist::Record rec;
     rec.put(s.human).put(int64_t(s.frame)).put(int64_t(s.target_view));
@@ -189,7 +195,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     opaque_1e4 += rec.int64("rays opaque to 1e-4");
     const std::string panel = rec.text("panel");
     if (!panel.empty() && writes)
-      io::write_file_atomic(image_dir / panel_file_name(score.human, score.frame, score.view), panel);
+      io::write_file_atomic(image_dir / panel_file_name(score.human, score.frame, score.view),
+                            panel);
     char note[64];
     std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", score.psnr, score.ssim);
     rows.at(size_t(item)) = std::move(score);
@@ -209,8 +216,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     summary.images = int(summary.per_image.size());
     summary.opaque_1e3 = rays ? double(opaque_1e3) / double(rays) : 0.0;
     summary.opaque_1e4 = rays ? double(opaque_1e4) / double(rays) : 0.0;
-    spdlog::info("eval: {} rays, final transmittance below 1e-3 on {:.4f}%, below 1e-4 on {:.4f}%", rays,
-                 100 * summary.opaque_1e3, 100 * summary.opaque_1e4);
+    spdlog::info("eval: {} rays, final transmittance below 1e-3 on {:.4f}%, below 1e-4 on {:.4f}%",
+                 rays, 100 * summary.opaque_1e3, 100 * summary.opaque_1e4);
     if (summary.images == 0) fail("setting '", setting, "' has no images to evaluate");
     auto mean = [&](auto field) {
       double sum = 0;

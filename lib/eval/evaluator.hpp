@@ -22,8 +22,8 @@ struct ImageScore {
   int frame = 0, view = 0;
   double psnr = 0, ssim = 0, lpips = 0;  // lpips NaN when unavailable
   double seconds = 0;
-  int64_t points = 0;         // rays x samples
-  int64_t culled_points = 0;  // of those, farther than render.cull_distance from the body
+  int64_t points = 0;            // rays x samples
+  int64_t culled_points = 0;     // of those, farther than render.cull_distance from the body
   int64_t evaluated_points = 0;  // points whose density the network computed
 };
 

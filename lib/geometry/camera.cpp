@@ -124,12 +124,13 @@ torch::Tensor project(const torch::Tensor& points_cam, const torch::Tensor& K) {
   return p.slice(1, 0, 2) / p.slice(1, 2, 3);
 }
 
-torch::Tensor project_views(const torch::Tensor& points, const torch::Tensor& K, const torch::Tensor& R,
-                            const torch::Tensor& T) {
-  TORCH_CHECK(points.dim() == 2 && points.size(1) == 3, "points must be (N, 3), got ", points.sizes());
+torch::Tensor project_views(const torch::Tensor& points, const torch::Tensor& K,
+                            const torch::Tensor& R, const torch::Tensor& T) {
+  TORCH_CHECK(points.dim() == 2 && points.size(1) == 3, "points must be (N, 3), got ",
+              points.sizes());
   TORCH_CHECK(K.dim() == 3 && R.sizes() == K.sizes() && T.numel() == 3 * K.size(0),
-              "project_views: K, R must be (V, 3, 3) and T (V, 3, 1), got ", K.sizes(), ", ", R.sizes(), ", ",
-              T.sizes());
+              "project_views: K, R must be (V, 3, 3) and T (V, 3, 1), got ", K.sizes(), ", ",
+              R.sizes(), ", ", T.sizes());
   const auto cam = torch::matmul(points.unsqueeze(0), R.transpose(1, 2)) + T.reshape({-1, 1, 3});
   const auto img = torch::matmul(cam, K.transpose(1, 2));
   return img.narrow(2, 0, 2) / img.narrow(2, 2, 1);
@@ -138,7 +139,8 @@ torch::Tensor project_views(const torch::Tensor& points, const torch::Tensor& K,
 torch::Tensor project_points(const torch::Tensor& points, const torch::Tensor& K,
                              const torch::Tensor& R, const torch::Tensor& T) {
   check_points(points, 3, "points");
-  return project_views(f64(points), f64(K).reshape({1, 3, 3}), f64(R).reshape({1, 3, 3}), f64(T).reshape({1, 3, 1}))
+  return project_views(f64(points), f64(K).reshape({1, 3, 3}), f64(R).reshape({1, 3, 3}),
+                       f64(T).reshape({1, 3, 1}))
       .squeeze(0);
 }
 

@@ -41,8 +41,8 @@ torch::Tensor project(const torch::Tensor& points_cam, const torch::Tensor& K);
 // The pinhole projection of world points into V cameras at once, x_cam = R x + T,
 // uv = (K x_cam)[:2] / z (no lens distortion), in the points' dtype: points (N, 3), K and R
 // (V, 3, 3), T (V, 3, 1) -> (V, N, 2) pixel coordinates. The network's projection (float32).
-torch::Tensor project_views(const torch::Tensor& points, const torch::Tensor& K, const torch::Tensor& R,
-                            const torch::Tensor& T);
+torch::Tensor project_views(const torch::Tensor& points, const torch::Tensor& K,
+                            const torch::Tensor& R, const torch::Tensor& T);
 
 // The same for one camera in float64: (N, 3) -> (N, 2).
 torch::Tensor project_points(const torch::Tensor& points, const torch::Tensor& K,

@@ -58,7 +58,8 @@ std::vector<int> parse_frame_range(const std::string& text) {
   // Counted before anything is allocated (int64: no overflow near INT_MAX).
   const int64_t count = (end - begin + step - 1) / step;
   if (count > kMaxVideoFrames)
-    fail("frame range '", text, "' holds ", count, " frames, more than a video may have (", kMaxVideoFrames, ")");
+    fail("frame range '", text, "' holds ", count, " frames, more than a video may have (",
+         kMaxVideoFrames, ")");
   std::vector<int> frames;
   for (int64_t f = begin; f < end; f += step) frames.push_back(int(f));
   return frames;
@@ -120,9 +121,11 @@ std::string describe(const Session& session, const VideoRequest& r, const std::s
   if (r.cameras == VideoRequest::Cameras::PathFile)
     y << YAML::Key << "path_file" << YAML::Value
       << fs::absolute(r.path_file).lexically_normal().string();
-  if (r.cameras == VideoRequest::Cameras::Dataset) y << YAML::Key << "camera" << YAML::Value << r.camera;
+  if (r.cameras == VideoRequest::Cameras::Dataset)
+    y << YAML::Key << "camera" << YAML::Value << r.camera;
   if (r.cameras == VideoRequest::Cameras::Orbit) y << YAML::Key << "view" << YAML::Value << r.view;
-  y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value << height;
+  y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value
+    << height;
   y << YAML::Key << "video_frames" << YAML::Value << count;
   y << YAML::Key << "settings" << YAML::Value << YAML::BeginMap;
   y << YAML::Key << "precision" << YAML::Value
@@ -178,7 +181,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   std::vector<int> frames = request.frames;
   if (frames.empty()) {
     const auto listed = session.setting_frames(h);
-    if (listed.empty()) fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
+    if (listed.empty())
+      fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
     frames = {listed.front()};
   }
   for (int f : frames)
@@ -191,7 +195,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   if (base_view < 0 || base_view >= human.num_cameras())
     fail(human.name(), ": camera ", base_view, " out of range [0, ", human.num_cameras(), ")");
   PreparedFrame prepared = session.prepare(h, frames.front(), base_view);
-  const int src_w = int(prepared.sample.target_image.size(1)), src_h = int(prepared.sample.target_image.size(0));
+  const int src_w = int(prepared.sample.target_image.size(1)),
+            src_h = int(prepared.sample.target_image.size(0));
   int width = request.width > 0 ? request.width : src_w;
   int height = request.height > 0 ? request.height : src_h;
 
@@ -208,12 +213,13 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
       Ts.push_back(human.camera(c).T);
     }
     const auto orbit = video::make_orbit(torch::stack(Rs), torch::stack(Ts));
-    const int n = request.orbit_views > 0 ? request.orbit_views : (frames.size() > 1 ? int(frames.size()) : 36);
+    const int n = request.orbit_views > 0 ? request.orbit_views
+                                          : (frames.size() > 1 ? int(frames.size()) : 36);
     if (n > kMaxVideoFrames)
       fail("--orbit ", n, ": more views than a video may have (", kMaxVideoFrames, ")");
     count = std::max(int(frames.size()), n);
     std::map<int, torch::Tensor> centers;  // one body per frame shown, not per view
-    for (int k = 0; k < count; ++k) {  // looking at the centre of the body of the frame shown
+    for (int k = 0; k < count; ++k) {      // looking at the centre of the body of the frame shown
       const int frame = frames[size_t(k) % frames.size()];
       auto it = centers.find(frame);
       if (it == centers.end()) it = centers.emplace(frame, session.body_center(h, frame)).first;
@@ -223,7 +229,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   } else {
     if (request.cameras == Cameras::PathFile) {
       const auto path = video::read_camera_path(request.path_file);
-      if (path.cameras.empty()) fail("camera path '", request.path_file.string(), "' has no cameras");
+      if (path.cameras.empty())
+        fail("camera path '", request.path_file.string(), "' has no cameras");
       cameras = path.cameras;
       if (request.width <= 0 && path.width > 0) width = path.width;
       if (request.height <= 0 && path.height > 0) height = path.height;
@@ -235,7 +242,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   }
 
   // What it costs, refused before anything is written when it cannot fit.
-  resources::check(session.render_estimate(prepared, width, height, count), session.config().max_memory_gb);
+  resources::check(session.render_estimate(prepared, width, height, count),
+                   session.config().max_memory_gb);
   VideoPlan plan;
   plan.human = h;
   plan.human_name = human.name();
@@ -249,8 +257,8 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
   return plan;
 }
 
-VideoSummary render_video(const Session& session, const VideoRequest& request, const fs::path& out_dir,
-                          dist::Communicator* comm) {
+VideoSummary render_video(const Session& session, const VideoRequest& request,
+                          const fs::path& out_dir, dist::Communicator* comm) {
   VideoPlan plan = plan_video(session, request);
   const int h = plan.human, base_view = plan.base_view, width = plan.width, height = plan.height,
             count = plan.count;
@@ -298,9 +306,10 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     for (int k = 0; k < count; ++k)
       if (!writer->has_frame(k)) todo.push_back(k);
     summary.skipped = count - int(todo.size());
-    spdlog::info("video: {} frames of {} ({} body frame{}), {}x{}{}", count, human.name(), frames.size(),
-                 frames.size() > 1 ? "s" : "", width, height,
-                 summary.skipped ? fmt::format(", {} already written (resumed)", summary.skipped) : "");
+    spdlog::info(
+        "video: {} frames of {} ({} body frame{}), {}x{}{}", count, human.name(), frames.size(),
+        frames.size() > 1 ? "s" : "", width, height,
+        summary.skipped ? fmt::format(", {} already written (resumed)", summary.skipped) : "");
   }
   // Which frames are left is rank 0's to say; each rank then takes every ranks-th of them.
   std::vector<std::vector<int64_t>> assignment{todo};
@@ -320,8 +329,10 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
       spdlog::info("video: {} frames to render over {} ranks", todo.size(), comm->world_size());
   }
 
-  Progress progress("render", comm && comm->rank() != 0 ? int64_t(assignment[size_t(comm->rank())].size())
-                                                         : int64_t(todo.size()), "frame");
+  Progress progress("render",
+                    comm && comm->rank() != 0 ? int64_t(assignment[size_t(comm->rank())].size())
+                                              : int64_t(todo.size()),
+                    "frame");
   double render_seconds = 0;
   auto work = [&](int64_t k) {
     const int frame = frames[size_t(k) % frames.size()];
@@ -339,7 +350,8 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
     const std::string png = rec.text("frame");
     if (writer) io::write_file_atomic(writer->frame_path(int(k)), png);
     ++summary.rendered;
-    progress.advance(1, "frame " + std::to_string(k) + " body " + std::to_string(frames[size_t(k) % frames.size()]));
+    progress.advance(1, "frame " + std::to_string(k) + " body " +
+                            std::to_string(frames[size_t(k) % frames.size()]));
   };
   auto finish = [&] {
     progress.finish();
@@ -353,8 +365,9 @@ VideoSummary render_video(const Session& session, const VideoRequest& request, c
       for (int k = 0; k < count; ++k) paths.push_back(writer->frame_path(k));
       const int columns = std::min(6, std::min(count, request.contact_sheet_frames));
       summary.contact_sheet = out_dir / "contact_sheet.png";
-      video::write_png(summary.contact_sheet,
-                       video::contact_sheet(paths, request.contact_sheet_frames, columns, std::min(width, 256)));
+      video::write_png(
+          summary.contact_sheet,
+          video::contact_sheet(paths, request.contact_sheet_frames, columns, std::min(width, 256)));
     }
   };
   if (comm) {

@@ -21,22 +21,22 @@ class Communicator;
 namespace th::inference {
 
 struct VideoRequest {
-  std::string human;                 // folder name; empty: the setting's first person
-  std::vector<int> frames;           // body frames (annots indices); empty: the setting's first
+  std::string human;        // folder name; empty: the setting's first person
+  std::vector<int> frames;  // body frames (annots indices); empty: the setting's first
   enum class Cameras { Orbit, PathFile, Dataset } cameras = Cameras::Orbit;
-  int orbit_views = 0;               // orbit cameras; 0: 36, or one per frame of a frame range
-  std::filesystem::path path_file;   // Cameras::PathFile
-  int camera = 0;                    // Cameras::Dataset: camera index
-  int view = 3;                      // the orbit's intrinsics and image size (METHOD 7: view 3)
-  int width = 0, height = 0;         // output size; 0: the view's image at data.ratio (K scaled)
-  bool force = false;                // discard frames of an earlier, different request
-  int contact_sheet_frames = 12;     // 0: no contact sheet
+  int orbit_views = 0;              // orbit cameras; 0: 36, or one per frame of a frame range
+  std::filesystem::path path_file;  // Cameras::PathFile
+  int camera = 0;                   // Cameras::Dataset: camera index
+  int view = 3;                     // the orbit's intrinsics and image size (METHOD 7: view 3)
+  int width = 0, height = 0;        // output size; 0: the view's image at data.ratio (K scaled)
+  bool force = false;               // discard frames of an earlier, different request
+  int contact_sheet_frames = 12;    // 0: no contact sheet
 };
 
 struct VideoSummary {
-  int frames = 0;      // video length
-  int rendered = 0;    // rendered by this run
-  int skipped = 0;     // already there (resumed)
+  int frames = 0;    // video length
+  int rendered = 0;  // rendered by this run
+  int skipped = 0;   // already there (resumed)
   double seconds_per_frame = 0;
   std::filesystem::path frames_dir;
   bool video_written = false;
@@ -47,13 +47,13 @@ struct VideoSummary {
 // A request resolved and checked against the data: everything render_video needs before it
 // writes anything (also what `transhuman-render --dry-run` checks).
 struct VideoPlan {
-  int human = 0;                           // the session's person index
+  int human = 0;  // the session's person index
   std::string human_name;
-  std::vector<int> frames;                 // body frames, cycled over the video
-  int base_view = 0;                       // the dataset camera the output image is modelled on
-  int width = 0, height = 0, count = 0;    // output size and video length
-  std::vector<video::PathCamera> shots;    // one camera per video frame
-  PreparedFrame prepared;                  // the first body frame, ready to render
+  std::vector<int> frames;               // body frames, cycled over the video
+  int base_view = 0;                     // the dataset camera the output image is modelled on
+  int width = 0, height = 0, count = 0;  // output size and video length
+  std::vector<video::PathCamera> shots;  // one camera per video frame
+  PreparedFrame prepared;                // the first body frame, ready to render
 };
 
 // Resolves `request` (see render_video for what is refused) and checks the memory it needs

@@ -1,16 +1,16 @@
 #include "inference/mesh_extraction.hpp"
 
-#include <opencv2/core.hpp>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <opencv2/core.hpp>
 
 #include "core/error.hpp"
-#include "core/resources.hpp"
 #include "core/progress.hpp"
+#include "core/resources.hpp"
 #include "geometry/mesh.hpp"
 #include "mesh/marching_cubes.hpp"
 #include "mesh/ply.hpp"
@@ -25,15 +25,16 @@ namespace {
 
 constexpr int kPad = 10;  // zero cells around the grid (METHOD 7)
 
-resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest& request, const Session& session,
-                                  const PreparedFrame& prepared) {
+resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest& request,
+                                  const Session& session, const PreparedFrame& prepared) {
   double n[3], side[3];
   for (int a = 0; a < 3; ++a) {
     side[a] = (bounds[1][a] - bounds[0][a]).item<double>();
     n[a] = std::ceil((side[a] + request.voxel) / request.voxel);
   }
   const double plane = (n[0] + 2 * kPad) * (n[1] + 2 * kPad), points = n[0] * n[1] * n[2];
-  const double slab = std::max(1.0, std::floor(double(request.slab_points) / (n[0] * n[1]))) * n[0] * n[1];
+  const double slab =
+      std::max(1.0, std::floor(double(request.slab_points) / (n[0] * n[1]))) * n[0] * n[1];
   // Marching cubes keeps three padded slices and five edge-index maps; a slab of points is
   // evaluated at once (float64 coordinates, density, culling indices); the mesh grows with the
   // surface: about two vertices per voxel of the box's surface area, two faces per vertex.
@@ -41,7 +42,8 @@ resources::Estimate mesh_estimate(const torch::Tensor& bounds, const MeshRequest
   const double verts = 2 * area / (request.voxel * request.voxel);
   const double cache = prepared.cache.nbytes();
   resources::Estimate e;
-  e.what = fmt::format("mesh grid {:.0f} x {:.0f} x {:.0f} at {} mm", n[0], n[1], n[2], request.voxel * 1000);
+  e.what = fmt::format("mesh grid {:.0f} x {:.0f} x {:.0f} at {} mm", n[0], n[1], n[2],
+                       request.voxel * 1000);
   e.bytes = plane * 8 * 4 + slab * 48 + verts * (12 + 2 * 24) + cache +
             double(session.config().render.chunk_points) * resources::kBytesPerChunkPoint;
   e.samples = points;
@@ -56,14 +58,16 @@ MeshPlan plan_mesh(const Session& session, const MeshRequest& request) {
     fail("mesh voxel size must be a positive number, got ", request.voxel);
   if (!(request.threshold >= 0) || !std::isfinite(request.threshold))
     fail("mesh threshold must be a finite number >= 0, got ", request.threshold,
-         " (the grid away from the body and its padding hold density 0: a negative level puts all of it inside)");
+         " (the grid away from the body and its padding hold density 0: a negative level puts all "
+         "of it inside)");
   MeshPlan plan;
   plan.human = session.find_human(request.human);
   const auto& human = session.human(plan.human);
   plan.frame = request.frame;
   if (plan.frame < 0) {
     const auto listed = session.setting_frames(plan.human);
-    if (listed.empty()) fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
+    if (listed.empty())
+      fail("setting '", session.config().eval.setting, "' lists no frames of ", human.name());
     plan.frame = listed.front();
   }
   if (request.view < 0 || request.view >= human.num_cameras())
@@ -72,13 +76,15 @@ MeshPlan plan_mesh(const Session& session, const MeshRequest& request) {
   // What the grid costs is checked first (a too fine voxel is refused in a second, not after
   // filling memory).
   const auto bounds = plan.prepared.sample.body.bounds.to(torch::kFloat64).reshape({2, 3});
-  resources::check(mesh_estimate(bounds, request, session, plan.prepared), session.config().max_memory_gb);
+  resources::check(mesh_estimate(bounds, request, session, plan.prepared),
+                   session.config().max_memory_gb);
   const auto grid = mesh::grid_over_bounds(bounds, request.voxel);
   plan.grid = {grid.width, grid.height, grid.depth};
   return plan;
 }
 
-MeshSummary extract_mesh(const Session& session, const MeshRequest& request, const fs::path& out_dir) {
+MeshSummary extract_mesh(const Session& session, const MeshRequest& request,
+                         const fs::path& out_dir) {
   const auto t0 = std::chrono::steady_clock::now();
   const MeshPlan plan = plan_mesh(session, request);
   const int frame = plan.frame;
@@ -102,7 +108,8 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
     const auto sigma = session.density(prepared, mesh::slab_points(grid, z0, d));
     const auto evaluated = sigma.index({sigma != 0});
     summary.evaluated_points += evaluated.numel();
-    seen.push_back(evaluated.slice(0, 0, evaluated.numel(), std::max<int64_t>(1, evaluated.numel() / 4096)));
+    seen.push_back(
+        evaluated.slice(0, 0, evaluated.numel(), std::max<int64_t>(1, evaluated.numel() / 4096)));
     mc.push(sigma.reshape({d, grid.height, grid.width}));
     progress.advance(d);
   });
@@ -114,10 +121,12 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   std::string stats = "no point near the body";
   if (all.numel()) {
     const auto q = torch::quantile(all, torch::tensor({0.5, 0.9, 0.99}, torch::kFloat64));
-    stats = fmt::format("density near the body: median {:.1f}, 90% {:.1f}, 99% {:.1f}, max {:.1f}; {:.2f}% above {}",
-                        q[0].item<double>(), q[1].item<double>(), q[2].item<double>(), all.max().item<double>(),
-                        100.0 * (all > request.threshold).to(torch::kFloat64).mean().item<double>(),
-                        request.threshold);
+    stats = fmt::format(
+        "density near the body: median {:.1f}, 90% {:.1f}, 99% {:.1f}, max {:.1f}; {:.2f}% above "
+        "{}",
+        q[0].item<double>(), q[1].item<double>(), q[2].item<double>(), all.max().item<double>(),
+        100.0 * (all > request.threshold).to(torch::kFloat64).mean().item<double>(),
+        request.threshold);
   }
   spdlog::info("mesh: {}", stats);
   if (summary.mesh.num_faces() == 0)
@@ -141,10 +150,11 @@ MeshSummary extract_mesh(const Session& session, const MeshRequest& request, con
   const auto forward = R[2], down = R[1];
   // The header names the world's up (the view camera's), for viewers such as the HTML report's.
   char up[96];
-  std::snprintf(up, sizeof up, ", up %.4f %.4f %.4f", -down[0].item<double>(), -down[1].item<double>(),
-                -down[2].item<double>());
-  mesh::write_ply(summary.ply, summary.mesh,
-                  "TransHuman-C++ mesh of " + human.name() + " frame " + std::to_string(frame) + up);
+  std::snprintf(up, sizeof up, ", up %.4f %.4f %.4f", -down[0].item<double>(),
+                -down[1].item<double>(), -down[2].item<double>());
+  mesh::write_ply(
+      summary.ply, summary.mesh,
+      "TransHuman-C++ mesh of " + human.name() + " frame " + std::to_string(frame) + up);
 
   const auto side = torch::cross(down, forward, 0);
   std::vector<cv::Mat> views;

@@ -16,12 +16,12 @@
 namespace th::inference {
 
 struct MeshRequest {
-  std::string human;          // empty: the setting's first person
-  int frame = -1;             // annots index; -1: the setting's first frame of that person
-  double voxel = 0.005;       // metres
-  double threshold = 20.0;    // on raw sigma
-  bool colors = false;        // vertex colours from the colour branch
-  int view = 3;               // the preview looks from this camera's direction (and from the side)
+  std::string human;        // empty: the setting's first person
+  int frame = -1;           // annots index; -1: the setting's first frame of that person
+  double voxel = 0.005;     // metres
+  double threshold = 20.0;  // on raw sigma
+  bool colors = false;      // vertex colours from the colour branch
+  int view = 3;             // the preview looks from this camera's direction (and from the side)
   int64_t slab_points = 1 << 20;  // grid points evaluated per slab (memory bound)
 };
 

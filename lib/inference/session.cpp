@@ -23,7 +23,8 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   canonical_ = smpl->v_template;  // float64: token positions [parity]
   model_ = model::TransHuman(config.model);
   pipeline::load_weights(*model_, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
-  tokens_ = std::make_unique<pipeline::Tokens>(*model_, smpl->v_template);  // the checkpoint's groups
+  tokens_ =
+      std::make_unique<pipeline::Tokens>(*model_, smpl->v_template);  // the checkpoint's groups
   model_->to(device);
   model_->eval();
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));
@@ -57,7 +58,8 @@ std::vector<int> Session::setting_frames(int index) const {
   std::vector<int> frames;
   for (size_t i = 0; i < dataset_->size(); ++i) {
     const auto& item = dataset_->item(i);
-    if (item.human == index && (frames.empty() || frames.back() != item.frame)) frames.push_back(item.frame);
+    if (item.human == index && (frames.empty() || frames.back() != item.frame))
+      frames.push_back(item.frame);
   }
   return frames;
 }
@@ -76,7 +78,8 @@ PreparedFrame Session::prepare(int human, int frame, int view) const {
   out.human = human;
   out.frame = frame;
   out.sample = dataset_->load_item({human, frame, view}, 0);
-  out.inputs = pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
+  out.inputs =
+      pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
   out.cache = pipeline::prepare_frame(*model_, out.inputs, config_.render);
   return out;
 }
@@ -89,9 +92,11 @@ pipeline::ViewResult Session::evaluate_view(int human_index, int frame, int view
     fail(h.name(), ": camera ", view, " out of range [0, ", h.num_cameras(), ")");
   torch::NoGradGuard no_grad;
   const auto sample = dataset_->load_item({human_index, frame, view}, 0);
-  const auto inputs = pipeline::frame_inputs(sample, canonical_, tokens_->labels(sample.body), device_);
+  const auto inputs =
+      pipeline::frame_inputs(sample, canonical_, tokens_->labels(sample.body), device_);
   try {
-    return pipeline::evaluate_view(*model_, config_.render, sample, inputs, nullptr, device_, nullptr);
+    return pipeline::evaluate_view(*model_, config_.render, sample, inputs, nullptr, device_,
+                                   nullptr);
   } catch (const Error& e) {
     fail("checkpoint '", checkpoint_.string(), "', ", e.what());
   }
@@ -107,15 +112,17 @@ video::PathCamera Session::dataset_camera(const PreparedFrame& frame, int view) 
   return {K, cam.R.to(torch::kFloat64), cam.T.to(torch::kFloat64).reshape({3, 1})};
 }
 
-torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
-                              int height, int64_t band_pixels) const {
+torch::Tensor Session::render(const PreparedFrame& frame, const video::PathCamera& camera,
+                              int width, int height, int64_t band_pixels) const {
   ViewControl control;
   control.band_pixels = band_pixels;
   return render_view(frame, camera, width, height, control)->rgb;
 }
 
-std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& frame, const video::PathCamera& camera,
-                                                        int width, int height, const ViewControl& control) const {
+std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& frame,
+                                                        const video::PathCamera& camera, int width,
+                                                        int height,
+                                                        const ViewControl& control) const {
   torch::NoGradGuard no_grad;
   const int64_t n = int64_t(height) * width;
   auto rgb = torch::zeros({n, 3}, torch::kFloat32), depth = torch::zeros({n}, torch::kFloat32),
@@ -148,16 +155,20 @@ std::optional<Session::ViewImages> Session::render_view(const PreparedFrame& fra
     acc.index_copy_(0, flat, result.acc.to(torch::kCPU, torch::kFloat32));
   });
   if (cancelled) return std::nullopt;
-  pipeline::require_finite_output(rgb, "checkpoint '" + checkpoint_.string() + "', " + frame.sample.human +
-                                           " frame " + std::to_string(frame.sample.frame));
-  return ViewImages{rgb.view({height, width, 3}), depth.view({height, width}), acc.view({height, width})};
+  pipeline::require_finite_output(rgb, "checkpoint '" + checkpoint_.string() + "', " +
+                                           frame.sample.human + " frame " +
+                                           std::to_string(frame.sample.frame));
+  return ViewImages{rgb.view({height, width, 3}), depth.view({height, width}),
+                    acc.view({height, width})};
 }
 
-resources::Estimate Session::render_estimate(const PreparedFrame& frame, int width, int height, int frames) const {
+resources::Estimate Session::render_estimate(const PreparedFrame& frame, int width, int height,
+                                             int frames) const {
   const double pixels = double(width) * height;
   const double cache = frame.cache.nbytes();
   resources::Estimate e;
-  e.what = fmt::format("render {} x {}{}", width, height, frames > 1 ? fmt::format(" x {} frames", frames) : "");
+  e.what = fmt::format("render {} x {}{}", width, height,
+                       frames > 1 ? fmt::format(" x {} frames", frames) : "");
   // The image (float RGB, its 8-bit copies for the PNG), one band of rays (float64 origins and
   // directions, near/far, pixel indices and their float32 copies), one chunk of the network.
   e.bytes = pixels * (12 + 6) + std::min(pixels, double(kRenderBandPixels)) * 200 + cache +

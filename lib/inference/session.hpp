@@ -39,7 +39,8 @@ class Session {
   // Loads the body model, the setting config.eval.setting of config.data's split file (as
   // transhuman-eval does: fixed reference views), the network and `checkpoint` (ours or the
   // reference's). Throws th::Error naming what is missing.
-  Session(const Config& config, const torch::Device& device, const std::filesystem::path& checkpoint);
+  Session(const Config& config, const torch::Device& device,
+          const std::filesystem::path& checkpoint);
 
   // Index of a person of the setting by folder name (empty: the setting's first). Throws
   // th::Error listing the setting's people.
@@ -65,8 +66,8 @@ class Session {
   // where no ray meets the frame's box.
   // Rays are made and rendered `band_pixels` pixels (whole rows) at a time.
   static constexpr int64_t kRenderBandPixels = int64_t{1} << 18;
-  torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width, int height,
-                       int64_t band_pixels = kRenderBandPixels) const;
+  torch::Tensor render(const PreparedFrame& frame, const video::PathCamera& camera, int width,
+                       int height, int64_t band_pixels = kRenderBandPixels) const;
   // What an interactive view needs beside rgb: depth (metres along the ray, 0 where no ray meets
   // the box) and accumulated opacity, (H, W) float32 each.
   struct ViewImages {
@@ -79,14 +80,15 @@ class Session {
     std::function<bool()> cancelled;
     int64_t band_pixels = kRenderBandPixels;
   };
-  std::optional<ViewImages> render_view(const PreparedFrame& frame, const video::PathCamera& camera, int width,
-                                        int height, const ViewControl& control) const;
+  std::optional<ViewImages> render_view(const PreparedFrame& frame, const video::PathCamera& camera,
+                                        int width, int height, const ViewControl& control) const;
   // Dataset view `view` of frame `frame` rendered and scored exactly as transhuman-eval scores
   // it (PSNR over the rays of the body's box, SSIM on its crop; no LPIPS): what a viewer shows
   // beside the ground truth when it snaps to a dataset camera.
   pipeline::ViewResult evaluate_view(int human, int frame, int view) const;
   // Peak memory and samples of rendering `frames` frames like `frame` at width x height.
-  resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height, int frames) const;
+  resources::Estimate render_estimate(const PreparedFrame& frame, int width, int height,
+                                      int frames) const;
 
   // Raw density sigma_raw of world points (N, 3): 0 for points farther than
   // render.cull_distance from the body (METHOD 7), the network elsewhere, in chunks of
@@ -94,7 +96,8 @@ class Session {
   torch::Tensor density(const PreparedFrame& frame, const torch::Tensor& pts) const;
 
   // Colour (N, 3) in [0, 1] of world points seen along ray directions dirs (N, 3), chunked.
-  torch::Tensor color(const PreparedFrame& frame, const torch::Tensor& pts, const torch::Tensor& dirs) const;
+  torch::Tensor color(const PreparedFrame& frame, const torch::Tensor& pts,
+                      const torch::Tensor& dirs) const;
 
   // The checkpoint's path, size and modification time: which weights made a set of frames.
   std::string checkpoint_id() const;

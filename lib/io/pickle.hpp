@@ -122,7 +122,8 @@ struct PickleExtensions {
   // and drop that state.
   bool ignore_dict_state = false;
 };
-Value parse_pickle(std::string_view bytes, const std::string& name, const PickleExtensions& extensions);
+Value parse_pickle(std::string_view bytes, const std::string& name,
+                   const PickleExtensions& extensions);
 
 // Writes the value as pickle.dumps(obj, protocol) of CPython 3.11 + numpy 1.24 would (protocol
 // 2-4, protocol 4 with FRAMEs; arrays as numpy pickles them, C order). Byte-identical for the

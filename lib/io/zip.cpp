@@ -91,7 +91,8 @@ FileSource::FileSource(const std::filesystem::path& path)
     : path_((refuse_special_file(path, "input"), path)), in_(path, std::ios::binary) {
   std::error_code ec;
   size_ = std::filesystem::file_size(path, ec);
-  if (!in_ || ec) th::fail("cannot open '", path.string(), "'", ec ? ": " + ec.message() : std::string());
+  if (!in_ || ec)
+    th::fail("cannot open '", path.string(), "'", ec ? ": " + ec.message() : std::string());
 }
 
 std::string FileSource::read(uint64_t offset, uint64_t n) const {
@@ -124,10 +125,12 @@ std::vector<ZipEntry> list_zip(const ZipSource& source, const std::string& name)
   uint64_t cd_offset = c.at(end + 16, 4, "end record");
   if (entries == 0xffff || cd_size == 0xffffffff || cd_offset == 0xffffffff) {
     if (end < 20 || c.at(end - 20, 4, "zip64 locator") != kEnd64LocatorSig) {
-      th::fail(name, ": zip64 archive without a zip64 locator at byte ", end - std::min<uint64_t>(end, 20));
+      th::fail(name, ": zip64 archive without a zip64 locator at byte ",
+               end - std::min<uint64_t>(end, 20));
     }
     const uint64_t rec = c.at(end - 20 + 8, 8, "zip64 locator");
-    if (c.at(rec, 4, "zip64 end record") != kEnd64Sig) th::fail(name, ": bad zip64 end record at byte ", rec);
+    if (c.at(rec, 4, "zip64 end record") != kEnd64Sig)
+      th::fail(name, ": bad zip64 end record at byte ", rec);
     entries = c.at(rec + 32, 8, "zip64 end record");
     cd_size = c.at(rec + 40, 8, "zip64 end record");
     cd_offset = c.at(rec + 48, 8, "zip64 end record");
@@ -137,7 +140,8 @@ std::vector<ZipEntry> list_zip(const ZipSource& source, const std::string& name)
   // The central directory in memory (it lies inside the archive, so no larger than it).
   const std::string cd_bytes = c.slice(cd_offset, cd_size, "central directory");
   const MemorySource cd_source(cd_bytes);
-  const std::string cd_name = name + " (central directory at byte " + std::to_string(cd_offset) + ")";
+  const std::string cd_name =
+      name + " (central directory at byte " + std::to_string(cd_offset) + ")";
   const Cursor cd(cd_source, cd_name);
 
   std::vector<ZipEntry> out;
@@ -167,7 +171,8 @@ std::vector<ZipEntry> list_zip(const ZipSource& source, const std::string& name)
         size_t f = x + 4;
         for (uint64_t* field : {&m.size, &m.compressed_size, &local}) {
           if (*field != 0xffffffff) continue;
-          if (f + 8 > x + 4 + len) th::fail(where, ": short zip64 extra field at byte ", cd_offset + p);
+          if (f + 8 > x + 4 + len)
+            th::fail(where, ": short zip64 extra field at byte ", cd_offset + p);
           *field = load_le(extra.data() + f, 8);
           f += 8;
         }
@@ -176,10 +181,13 @@ std::vector<ZipEntry> list_zip(const ZipSource& source, const std::string& name)
     }
     if (flags & 1) th::fail(where, ": encrypted zip members are not supported");
     if (m.method != 0 && m.method != 8)
-      th::fail(where, ": unsupported zip compression method ", m.method, " (only stored and deflate)");
+      th::fail(where, ": unsupported zip compression method ", m.method,
+               " (only stored and deflate)");
     if (m.method == 0 && m.compressed_size != m.size)
-      th::fail(where, ": stored member with different sizes (", m.compressed_size, " vs ", m.size, ")");
-    if (c.at(local, 4, "local header") != kLocalSig) th::fail(where, ": bad local header at byte ", local);
+      th::fail(where, ": stored member with different sizes (", m.compressed_size, " vs ", m.size,
+               ")");
+    if (c.at(local, 4, "local header") != kLocalSig)
+      th::fail(where, ": bad local header at byte ", local);
     const uint64_t local_name = c.at(local + 26, 2, "local header");
     const uint64_t local_extra = c.at(local + 28, 2, "local header");
     m.data_offset = local + 30 + local_name + local_extra;
@@ -195,7 +203,8 @@ std::string read_member(const ZipSource& source, const ZipEntry& entry, const st
   const Cursor c(source, name);
   std::string raw = c.slice(entry.data_offset, entry.compressed_size, "member data");
   std::string data = entry.method == 0 ? std::move(raw) : inflate_raw(raw, entry.size, where);
-  const uLong actual = crc32_z(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(data.data()), data.size());
+  const uLong actual =
+      crc32_z(crc32(0L, Z_NULL, 0), reinterpret_cast<const Bytef*>(data.data()), data.size());
   if (actual != entry.crc) th::fail(where, ": CRC mismatch (corrupt archive)");
   return data;
 }
@@ -203,7 +212,8 @@ std::string read_member(const ZipSource& source, const ZipEntry& entry, const st
 std::vector<ZipMember> read_zip(std::string_view archive, const std::string& name) {
   const MemorySource source(archive);
   std::vector<ZipMember> members;
-  for (const auto& e : list_zip(source, name)) members.push_back({e.name, read_member(source, e, name)});
+  for (const auto& e : list_zip(source, name))
+    members.push_back({e.name, read_member(source, e, name)});
   return members;
 }
 

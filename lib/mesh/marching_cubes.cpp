@@ -298,8 +298,8 @@ DenseGrid grid_over_bounds(const torch::Tensor& bounds, double voxel) {
     grid.spec.voxel[a] = voxel;
     // Exactly numpy's arange length, ceil((stop - start) / step), rounding included.
     const double count = std::ceil((hi + voxel - lo) / voxel);
-    TORCH_CHECK(count < double(int64_t{1} << 40), "grid_over_bounds: ", count, " points on axis ", a, " at voxel ",
-                voxel, " (too fine to count)");
+    TORCH_CHECK(count < double(int64_t{1} << 40), "grid_over_bounds: ", count, " points on axis ",
+                a, " at voxel ", voxel, " (too fine to count)");
     n[a] = static_cast<int64_t>(count);
   }
   grid.width = n[0];

@@ -16,12 +16,11 @@ namespace {
 struct Conv {
   int index, in, out;
 };
-const std::vector<std::vector<Conv>> kSlices = {
-    {{0, 3, 64}, {2, 64, 64}},
-    {{5, 64, 128}, {7, 128, 128}},
-    {{10, 128, 256}, {12, 256, 256}, {14, 256, 256}},
-    {{17, 256, 512}, {19, 512, 512}, {21, 512, 512}},
-    {{24, 512, 512}, {26, 512, 512}, {28, 512, 512}}};
+const std::vector<std::vector<Conv>> kSlices = {{{0, 3, 64}, {2, 64, 64}},
+                                                {{5, 64, 128}, {7, 128, 128}},
+                                                {{10, 128, 256}, {12, 256, 256}, {14, 256, 256}},
+                                                {{17, 256, 512}, {19, 512, 512}, {21, 512, 512}},
+                                                {{24, 512, 512}, {26, 512, 512}, {28, 512, 512}}};
 
 }  // namespace
 
@@ -34,8 +33,8 @@ LpipsImpl::LpipsImpl() {
       seq->push_back(nn::ReLU());
     }
     slices_.push_back(register_module("slice" + std::to_string(s), seq));
-    lin_.push_back(register_buffer("lin" + std::to_string(s),
-                                   torch::zeros({1, kSlices[s].back().out, 1, 1})));
+    lin_.push_back(
+        register_buffer("lin" + std::to_string(s), torch::zeros({1, kSlices[s].back().out, 1, 1})));
   }
   shift_ = register_buffer("shift", torch::tensor({-.030f, -.088f, -.188f}).reshape({1, 3, 1, 1}));
   scale_ = register_buffer("scale", torch::tensor({.458f, .448f, .450f}).reshape({1, 3, 1, 1}));
@@ -88,8 +87,10 @@ torch::Tensor LpipsImpl::forward(const torch::Tensor& a, const torch::Tensor& b)
 std::shared_ptr<LpipsImpl> try_load_lpips(const std::string& file, const torch::Device& device,
                                           const std::string& purpose) {
   if (file.empty()) {
-    spdlog::warn("no LPIPS weights configured: {} is off (make the file once with "
-                 "scripts/export_lpips.py)", purpose);
+    spdlog::warn(
+        "no LPIPS weights configured: {} is off (make the file once with "
+        "scripts/export_lpips.py)",
+        purpose);
     return nullptr;
   }
   if (!std::filesystem::exists(file)) {

@@ -13,12 +13,14 @@ using torch::indexing::Slice;
 double psnr(const torch::Tensor& pred, const torch::Tensor& gt) {
   TORCH_CHECK(pred.sizes() == gt.sizes(), "psnr: pred ", pred.sizes(), " and gt ", gt.sizes(),
               " differ in shape");
-  const double mse = (pred.to(torch::kFloat64) - gt.to(torch::kFloat64)).pow(2).mean().item<double>();
+  const double mse =
+      (pred.to(torch::kFloat64) - gt.to(torch::kFloat64)).pow(2).mean().item<double>();
   return -10.0 * std::log10(mse);
 }
 
 double ssim(const torch::Tensor& a, const torch::Tensor& b, double data_range) {
-  TORCH_CHECK(a.dim() == 3 && a.sizes() == b.sizes(), "ssim: images must be (H, W, C) of one shape");
+  TORCH_CHECK(a.dim() == 3 && a.sizes() == b.sizes(),
+              "ssim: images must be (H, W, C) of one shape");
   const int win = 7;
   TORCH_CHECK(a.size(0) >= win && a.size(1) >= win, "ssim: images smaller than the 7x7 window (",
               a.sizes(), ")");
@@ -26,15 +28,17 @@ double ssim(const torch::Tensor& a, const torch::Tensor& b, double data_range) {
   // the pixels that the 3-pixel crop keeps, so scikit-image's border padding never matters.
   const auto x = a.to(torch::kFloat64).permute({2, 0, 1}).unsqueeze(1);
   const auto y = b.to(torch::kFloat64).permute({2, 0, 1}).unsqueeze(1);
-  auto mean = [&](const torch::Tensor& t) { return F::avg_pool2d(t, F::AvgPool2dFuncOptions(win).stride(1)); };
+  auto mean = [&](const torch::Tensor& t) {
+    return F::avg_pool2d(t, F::AvgPool2dFuncOptions(win).stride(1));
+  };
   const double np = win * win, cov_norm = np / (np - 1.0);
   const auto ux = mean(x), uy = mean(y);
   const auto vx = cov_norm * (mean(x * x) - ux * ux);
   const auto vy = cov_norm * (mean(y * y) - uy * uy);
   const auto vxy = cov_norm * (mean(x * y) - ux * uy);
   const double c1 = std::pow(0.01 * data_range, 2), c2 = std::pow(0.03 * data_range, 2);
-  const auto s = ((2 * ux * uy + c1) * (2 * vxy + c2)) /
-                 ((ux * ux + uy * uy + c1) * (vx + vy + c2));
+  const auto s =
+      ((2 * ux * uy + c1) * (2 * vxy + c2)) / ((ux * ux + uy * uy + c1) * (vx + vy + c2));
   return s.mean({1, 2, 3}).mean().item<double>();  // per channel, then over channels
 }
 

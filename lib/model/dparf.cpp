@@ -22,16 +22,21 @@ TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& 
   return f;
 }
 
-DPaRF::DPaRF(const DPaRFConfig& config) : config_(config), fused_(config.pe_rounding == PeRounding::fused) {
+DPaRF::DPaRF(const DPaRFConfig& config)
+    : config_(config), fused_(config.pe_rounding == PeRounding::fused) {
   const int64_t G = 3 + 6 * config.pe_freqs;
-  using P = torch::Tensor (DPaRF::*)(const torch::Tensor&, const FieldQuery&, torch::Tensor&, torch::Tensor&) const;
-  using T = torch::Tensor (DPaRF::*)(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const;
+  using P = torch::Tensor (DPaRF::*)(const torch::Tensor&, const FieldQuery&, torch::Tensor&,
+                                     torch::Tensor&) const;
+  using T =
+      torch::Tensor (DPaRF::*)(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const;
   switch (config.coordinate) {
     case Coordinate::relative:
-      form_ = {G, true, P(&DPaRF::relative_coords), T(&DPaRF::relative_coords), &DPaRF::relative_field_codes};
+      form_ = {G, true, P(&DPaRF::relative_coords), T(&DPaRF::relative_coords),
+               &DPaRF::relative_field_codes};
       break;
     case Coordinate::absolute:
-      form_ = {G, false, P(&DPaRF::absolute_coords), T(&DPaRF::absolute_coords), &DPaRF::absolute_field_codes};
+      form_ = {G, false, P(&DPaRF::absolute_coords), T(&DPaRF::absolute_coords),
+               &DPaRF::absolute_field_codes};
       break;
     case Coordinate::none:
       form_ = {0, false, P(&DPaRF::no_coords), T(&DPaRF::no_coords), &DPaRF::no_field_codes};
@@ -51,7 +56,8 @@ torch::Tensor DPaRF::local_coordinates(const TokenFrames& frames, const torch::T
 
 // ---- the coordinate encodings -----------------------------------------------------------------
 
-torch::Tensor DPaRF::no_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const {
+torch::Tensor DPaRF::no_field_codes(const TokenFrames&, const torch::Tensor& xs,
+                                    const torch::Tensor& index) const {
   return torch::empty({index.size(0), index.size(1), 0}, xs.options());
 }
 
@@ -60,28 +66,33 @@ torch::Tensor DPaRF::absolute_coords(const torch::Tensor& xs, const FieldQuery&,
   return sincos_encoding(xs, config_.pe_freqs, true, fused_);
 }
 
-torch::Tensor DPaRF::absolute_coords(const TokenFrames&, const torch::Tensor& xs, const FieldQuery&) const {
+torch::Tensor DPaRF::absolute_coords(const TokenFrames&, const torch::Tensor& xs,
+                                     const FieldQuery&) const {
   return sincos_encoding(xs, config_.pe_freqs, true, fused_);
 }
 
 torch::Tensor DPaRF::absolute_field_codes(const TokenFrames&, const torch::Tensor& xs,
                                           const torch::Tensor& index) const {
-  return sincos_encoding(xs, config_.pe_freqs, true, fused_).unsqueeze(1).expand({index.size(0), index.size(1), form_.dim});
+  return sincos_encoding(xs, config_.pe_freqs, true, fused_)
+      .unsqueeze(1)
+      .expand({index.size(0), index.size(1), form_.dim});
 }
 
 torch::Tensor DPaRF::relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
                                           const torch::Tensor& index) const {
   const auto l = local_coordinates(frames, xs, index);
-  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true, fused_).view({index.size(0), index.size(1), -1});
+  return sincos_encoding(l.reshape({-1, 3}), config_.pe_freqs, true, fused_)
+      .view({index.size(0), index.size(1), -1});
 }
 
-torch::Tensor DPaRF::relative_coords(const TokenFrames& frames, const torch::Tensor& xs, const FieldQuery& q) const {
+torch::Tensor DPaRF::relative_coords(const TokenFrames& frames, const torch::Tensor& xs,
+                                     const FieldQuery& q) const {
   const auto g = relative_field_codes(frames, xs, q.index);  // (N, Nk, G)
   return torch::bmm(q.weight.unsqueeze(1), g).squeeze(1);
 }
 
-torch::Tensor DPaRF::relative_coords(const torch::Tensor& x, const FieldQuery& q, torch::Tensor& local,
-                                     torch::Tensor& args) const {
+torch::Tensor DPaRF::relative_coords(const torch::Tensor& x, const FieldQuery& q,
+                                     torch::Tensor& local, torch::Tensor& args) const {
   // g_k = [l_k, sin(args)]; coords = sum_k w_k g_k.
   args.sin_();
   const int64_t n = x.size(0), nk = q.index.size(1), nf2 = 2 * config_.pe_freqs, G = 3 + nf2 * 3;
@@ -115,23 +126,25 @@ namespace {
 // enable no FMA, so no rounding changes).
 template <class T>
 inline __attribute__((always_inline)) void squared_distances(T x, T y, T z, const T* __restrict ox,
-                                                             const T* __restrict oy, const T* __restrict oz,
-                                                             int64_t nt, T* __restrict d2) {
+                                                             const T* __restrict oy,
+                                                             const T* __restrict oz, int64_t nt,
+                                                             T* __restrict d2) {
   for (int64_t t = 0; t < nt; ++t) {
     const T dx = x - ox[t], dy = y - oy[t], dz = z - oz[t];
     d2[t] = dx * dx + dy * dy + dz * dz;
   }
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void squared_distances_f(
-    float x, float y, float z, const float* ox, const float* oy, const float* oz, int64_t nt, float* d2) {
+    float x, float y, float z, const float* ox, const float* oy, const float* oz, int64_t nt,
+    float* d2) {
   squared_distances<float>(x, y, z, ox, oy, oz, nt, d2);
 }
-void squared_distances_any(float x, float y, float z, const float* ox, const float* oy, const float* oz, int64_t nt,
-                           float* d2) {
+void squared_distances_any(float x, float y, float z, const float* ox, const float* oy,
+                           const float* oz, int64_t nt, float* d2) {
   squared_distances_f(x, y, z, ox, oy, oz, nt, d2);
 }
-void squared_distances_any(double x, double y, double z, const double* ox, const double* oy, const double* oz,
-                           int64_t nt, double* d2) {
+void squared_distances_any(double x, double y, double z, const double* ox, const double* oy,
+                           const double* oz, int64_t nt, double* d2) {
   squared_distances<double>(x, y, z, ox, oy, oz, nt, d2);
 }
 
@@ -139,9 +152,10 @@ void squared_distances_any(double x, double y, double z, const double* ox, const
 // softmax(-d / T) weights, local coordinates and the arguments x * f + phase of their encoding.
 // origins: (nt, 3); axes: (3, nt), the same origins per axis.
 template <class T>
-void nearest_fields(const T* xs, const T* origins, const T* axes, const T* rotations, int64_t nt, int64_t nk,
-                    double temperature, const T* freqs, const T* phases, int64_t nf2, bool fused, int64_t n_begin,
-                    int64_t n_end, int64_t* out_idx, T* out_w, T* out_local, T* out_args) {
+void nearest_fields(const T* xs, const T* origins, const T* axes, const T* rotations, int64_t nt,
+                    int64_t nk, double temperature, const T* freqs, const T* phases, int64_t nf2,
+                    bool fused, int64_t n_begin, int64_t n_end, int64_t* out_idx, T* out_w,
+                    T* out_local, T* out_args) {
   std::vector<T> best_d(nk), dist2(nt);
   std::vector<int64_t> best_i(nk);
   for (int64_t n = n_begin; n < n_end; ++n) {
@@ -216,12 +230,12 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
   }
   AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "dparf_query", [&] {
     at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
-      nearest_fields<scalar_t>(x.data_ptr<scalar_t>(), O.data_ptr<scalar_t>(), axes.data_ptr<scalar_t>(),
-                               R.data_ptr<scalar_t>(), nt, nk,
-                               config_.softmax_temperature, freqs.data_ptr<scalar_t>(),
-                               phases.data_ptr<scalar_t>(), nf2, fused_, begin, end, q.index.data_ptr<int64_t>(),
-                               q.weight.data_ptr<scalar_t>(), relative ? local.data_ptr<scalar_t>() : nullptr,
-                               relative ? args.data_ptr<scalar_t>() : nullptr);
+      nearest_fields<scalar_t>(
+          x.data_ptr<scalar_t>(), O.data_ptr<scalar_t>(), axes.data_ptr<scalar_t>(),
+          R.data_ptr<scalar_t>(), nt, nk, config_.softmax_temperature, freqs.data_ptr<scalar_t>(),
+          phases.data_ptr<scalar_t>(), nf2, fused_, begin, end, q.index.data_ptr<int64_t>(),
+          q.weight.data_ptr<scalar_t>(), relative ? local.data_ptr<scalar_t>() : nullptr,
+          relative ? args.data_ptr<scalar_t>() : nullptr);
     });
   });
   q.coords = (this->*form_.from_pass)(x, q, local, args);
@@ -232,7 +246,8 @@ FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& 
   TORCH_CHECK(xs.dim() == 2 && xs.size(1) == 3, "DPaRF points must be (N, 3), got ", xs.sizes());
   const auto& O = frames.origins;
   const int64_t nk = config_.nk;
-  TORCH_CHECK(O.size(0) >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", O.size(0));
+  TORCH_CHECK(O.size(0) >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ",
+              O.size(0));
   FieldQuery q;
   // Candidate selection on |x|^2 - 2 x.O + |O|^2; exact distances of the chosen fields below.
   const auto d2 = torch::addmm((O * O).sum(1).unsqueeze(0), xs, O.t(), 1, -2);
@@ -252,7 +267,7 @@ torch::Tensor DPaRF::features(const TokenFrames& frames, const torch::Tensor& to
   std::vector<torch::Tensor> per_view;
   for (int64_t v = 0; v < V; ++v) {
     auto t = tokens[v].index_select(0, q.index.flatten()).view({n, nk, -1});  // (N, Nk, C)
-    t = torch::cat({t, (this->*form_.per_field)(frames, xs, q.index)}, -1);  // [T_v(k); g_k]
+    t = torch::cat({t, (this->*form_.per_field)(frames, xs, q.index)}, -1);   // [T_v(k); g_k]
     per_view.push_back((q.weight.unsqueeze(-1) * t).sum(1));
   }
   return torch::stack(per_view, 1);

@@ -55,22 +55,32 @@ class DPaRF {
   struct CoordinateForm {
     int64_t dim = 0;
     bool local = false;  // the CPU pass computes local coordinates and encoding arguments
-    torch::Tensor (DPaRF::*from_pass)(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
-                                      torch::Tensor& args) const;
+    torch::Tensor (DPaRF::*from_pass)(const torch::Tensor& xs, const FieldQuery& q,
+                                      torch::Tensor& local, torch::Tensor& args) const;
     torch::Tensor (DPaRF::*from_tensors)(const TokenFrames& frames, const torch::Tensor& xs,
                                          const FieldQuery& q) const;
     torch::Tensor (DPaRF::*per_field)(const TokenFrames& frames, const torch::Tensor& xs,
                                       const torch::Tensor& index) const;
   };
-  torch::Tensor no_coords(const torch::Tensor&, const FieldQuery&, torch::Tensor&, torch::Tensor&) const { return {}; }
-  torch::Tensor no_coords(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const { return {}; }
-  torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const;
-  torch::Tensor absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&, torch::Tensor&) const;
-  torch::Tensor absolute_coords(const TokenFrames&, const torch::Tensor& xs, const FieldQuery&) const;
-  torch::Tensor absolute_field_codes(const TokenFrames&, const torch::Tensor& xs, const torch::Tensor& index) const;
+  torch::Tensor no_coords(const torch::Tensor&, const FieldQuery&, torch::Tensor&,
+                          torch::Tensor&) const {
+    return {};
+  }
+  torch::Tensor no_coords(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const {
+    return {};
+  }
+  torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs,
+                               const torch::Tensor& index) const;
+  torch::Tensor absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&,
+                                torch::Tensor&) const;
+  torch::Tensor absolute_coords(const TokenFrames&, const torch::Tensor& xs,
+                                const FieldQuery&) const;
+  torch::Tensor absolute_field_codes(const TokenFrames&, const torch::Tensor& xs,
+                                     const torch::Tensor& index) const;
   torch::Tensor relative_coords(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
                                 torch::Tensor& args) const;
-  torch::Tensor relative_coords(const TokenFrames& frames, const torch::Tensor& xs, const FieldQuery& q) const;
+  torch::Tensor relative_coords(const TokenFrames& frames, const torch::Tensor& xs,
+                                const FieldQuery& q) const;
   torch::Tensor relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
                                      const torch::Tensor& index) const;
 

@@ -46,7 +46,9 @@ BatchNormImpl::BatchNormImpl(int64_t channels, bool batch_stats)
 namespace {
 
 // Per-channel sums over (N, H, W) of a (N, C, H, W) tensor, in float64.
-torch::Tensor channel_sums(const torch::Tensor& t) { return t.sum({0, 2, 3}, false, torch::kFloat64); }
+torch::Tensor channel_sums(const torch::Tensor& t) {
+  return t.sum({0, 2, 3}, false, torch::kFloat64);
+}
 
 // The ranks' reducer as autograd's saved data holds it (a capsule): the graph keeps it alive
 // until backward runs, even if the module's is replaced in between.
@@ -78,14 +80,16 @@ struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
     {
       torch::NoGradGuard no_grad;
       running_mean.mul_(1 - momentum).add_(mean.to(running_mean.scalar_type()), momentum);
-      running_var.mul_(1 - momentum).add_((var * (count / (count - 1))).to(running_var.scalar_type()), momentum);
+      running_var.mul_(1 - momentum)
+          .add_((var * (count / (count - 1))).to(running_var.scalar_type()), momentum);
     }
     const auto m4 = mean.view({1, C, 1, 1}), s4 = invstd.view({1, C, 1, 1});
     const auto xhat = (xd - m4) * s4;
     ctx->save_for_backward({x, weight, mean, invstd});
     ctx->saved_data["count"] = count;
     ctx->saved_data["reduce"] = c10::IValue::make_capsule(holder);
-    return (xhat * weight.to(torch::kFloat64).view({1, C, 1, 1}) + bias.to(torch::kFloat64).view({1, C, 1, 1}))
+    return (xhat * weight.to(torch::kFloat64).view({1, C, 1, 1}) +
+            bias.to(torch::kFloat64).view({1, C, 1, 1}))
         .to(x.scalar_type());
   }
 
@@ -106,9 +110,16 @@ struct SyncBatchNorm : torch::autograd::Function<SyncBatchNorm> {
     reduce(both);
     const auto mean_dy = (both.slice(0, 0, C) / count).view({1, C, 1, 1});
     const auto mean_dy_xhat = (both.slice(0, C, 2 * C) / count).view({1, C, 1, 1});
-    const auto dx = (weight.to(torch::kFloat64).view({1, C, 1, 1}) * s4) * (dy - mean_dy - xhat * mean_dy_xhat);
-    return {dx.to(x.scalar_type()), sum_dy_xhat.to(weight.scalar_type()), sum_dy.to(weight.scalar_type()),
-            torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    const auto dx =
+        (weight.to(torch::kFloat64).view({1, C, 1, 1}) * s4) * (dy - mean_dy - xhat * mean_dy_xhat);
+    return {dx.to(x.scalar_type()),
+            sum_dy_xhat.to(weight.scalar_type()),
+            sum_dy.to(weight.scalar_type()),
+            torch::Tensor(),
+            torch::Tensor(),
+            torch::Tensor(),
+            torch::Tensor(),
+            torch::Tensor()};
   }
 };
 
@@ -134,7 +145,8 @@ torch::Tensor BatchNormImpl::forward(const torch::Tensor& x) {
     if (sync)
       return SyncBatchNorm::apply(x, weight, bias, running_mean, running_var,
                                   c10::make_intrusive<ReducerHolder>(sync), momentum, eps);
-    return torch::batch_norm(x, weight, bias, running_mean, running_var, true, momentum, eps, false);
+    return torch::batch_norm(x, weight, bias, running_mean, running_var, true, momentum, eps,
+                             false);
   }
   if (batch_stats_at_inference)  // [parity] statistics of the reference views, not updated
     return torch::batch_norm(x, weight, bias, {}, {}, true, momentum, eps, false);
@@ -153,7 +165,8 @@ BasicBlockImpl::BasicBlockImpl(int64_t in, int64_t out, int64_t stride, bool bat
   if (stride != 1 || in != out) {
     auto down = conv(in, out, 1, stride, 0, false);
     init_conv(down);
-    downsample = register_module("downsample", torch::nn::Sequential(down, BatchNorm(out, batch_stats)));
+    downsample =
+        register_module("downsample", torch::nn::Sequential(down, BatchNorm(out, batch_stats)));
   }
 }
 
@@ -204,7 +217,8 @@ std::pair<torch::Tensor, torch::Tensor> PixelGeometry::point_view_rows(const tor
 
 torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_taps) const {
   auto out = weighted_gather(table, level_taps, table_grad_sink);
-  if (image_weight.defined()) out.addmm_(weighted_gather(image_table, image_taps), image_weight.t());
+  if (image_weight.defined())
+    out.addmm_(weighted_gather(image_table, image_taps), image_weight.t());
   return out.add_(bias);
 }
 
@@ -220,7 +234,8 @@ void PixelReadout::visit(const TensorVisitor& fn) {
 EncoderImpl::EncoderImpl(const EncoderConfig& config, bool raw_rgb, int64_t holder_channels) {
   model = register_module("model", ResNetTrunk(config.batchnorm == BatchNormStats::batch));
   // Registered (and initialised) in this order: the random initial weights depend on it.
-  reduction_layer = register_module("reduction_layer", conv(raw_rgb ? 384 : 256, holder_channels, 1, 1, 0, true));
+  reduction_layer =
+      register_module("reduction_layer", conv(raw_rgb ? 384 : 256, holder_channels, 1, 1, 0, true));
   if (raw_rgb) upsample_color = register_module("upsample_color", conv(3, 128, 1, 1, 0, true));
 }
 
@@ -241,7 +256,8 @@ torch::Tensor EncoderImpl::pixel_features(const EncodedViews& enc) const {
   const auto H = enc.geometry.height, W = enc.geometry.width;
   std::vector<torch::Tensor> parts;
   for (const auto& l : enc.levels) parts.push_back(upsample(l, H, W));
-  if (upsample_color) parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
+  if (upsample_color)
+    parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
   return torch::cat(parts, 1);
 }
 
@@ -266,13 +282,16 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
   return torch::cat(parts, 1);
 }
 
-torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const torch::Tensor& uv) const {
+torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc,
+                                                 const torch::Tensor& uv) const {
   const auto [flat, view] = PixelGeometry::point_view_rows(uv);
-  return sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view), enc.geometry.image_taps(flat, view))
+  return sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view),
+                               enc.geometry.image_taps(flat, view))
       .view({uv.size(0), uv.size(1), -1});
 }
 
-std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::TensorOptions& options) const {
+std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(
+    const torch::TensorOptions& options) const {
   std::vector<torch::Tensor> uv, view;
   for (size_t v = 0; v < offset.size(); ++v) {
     const auto ys = torch::arange(y0[v], y0[v] + h[v], options);
@@ -284,7 +303,8 @@ std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(const torch::Tensor
   return {torch::cat(uv), torch::cat(view)};
 }
 
-std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t H,
+std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv,
+                                                  const torch::Tensor& view, int64_t H,
                                                   int64_t W) const {
   TORCH_CHECK(uv.device().is_cpu(), "window taps: uv must be on CPU");
   // grid_sample's 2 x 2 taps into the (V H W) rows of the whole images, then moved to the rows
@@ -302,7 +322,8 @@ std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv, const
         bool ok = true;
         for (int64_t k = 0; k < T_ && ok; ++k) {
           const int64_t v = i[k] / (H * W), y = i[k] % (H * W) / W, x = i[k] % W;
-          ok = v >= 0 && v < views && x >= x0[v] && x < x0[v] + w[v] && y >= y0[v] && y < y0[v] + h[v];
+          ok = v >= 0 && v < views && x >= x0[v] && x < x0[v] + w[v] && y >= y0[v] &&
+               y < y0[v] + h[v];
           if (ok) i[k] = offset[v] + (y - y0[v]) * w[v] + (x - x0[v]);
         }
         in[m] = ok;
@@ -339,19 +360,21 @@ torch::Tensor EncoderImpl::paint(const EncodedViews& enc, const torch::Tensor& u
                                  const torch::Tensor& visibility) const {
   const auto V = uv.size(0), nv = uv.size(1);
   TORCH_CHECK(uv.dim() == 3 && uv.size(2) == 2, "paint uv must be (V, Nv, 2), got ", uv.sizes());
-  TORCH_CHECK(visibility.sizes() == torch::IntArrayRef({V, nv}), "visibility must be (", V, ", ", nv,
-              "), got ", visibility.sizes());
+  TORCH_CHECK(visibility.sizes() == torch::IntArrayRef({V, nv}), "visibility must be (", V, ", ",
+              nv, "), got ", visibility.sizes());
   const auto flat = uv.reshape({-1, 2});
   const auto view = torch::arange(V, uv.options().dtype(torch::kLong)).repeat_interleave(nv);
   const auto p = sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view),
                                        enc.geometry.image_taps(flat, view));
   const auto holder = F::linear(p, reduction_layer->weight.flatten(1), reduction_layer->bias);
-  return holder.view({V, nv, -1}) * visibility.unsqueeze(-1).to(holder.device(), holder.scalar_type());
+  return holder.view({V, nv, -1}) *
+         visibility.unsqueeze(-1).to(holder.device(), holder.scalar_type());
 }
 
 torch::Tensor EncoderImpl::paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
                                         const torch::Tensor& visibility) const {
-  const auto holder = torch::conv2d(pixel_features(enc), reduction_layer->weight, reduction_layer->bias);  // (V, 192, H, W)
+  const auto holder = torch::conv2d(pixel_features(enc), reduction_layer->weight,
+                                    reduction_layer->bias);  // (V, 192, H, W)
   const auto sampled = grid_sample_pixels(holder, uv.permute({1, 0, 2})).permute({1, 0, 2});
   return sampled * visibility.unsqueeze(-1).to(sampled.device(), sampled.scalar_type());
 }
@@ -381,7 +404,10 @@ torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& 
   const auto scale = torch::tensor({2.0 / (W - 1), 2.0 / (H - 1)}, uv.options());
   const auto grid = (uv * scale - 1).permute({1, 0, 2}).unsqueeze(1);  // (V, 1, N, 2)
   const auto out = F::grid_sample(map, grid,
-                                  F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(true));
+                                  F::GridSampleFuncOptions()
+                                      .mode(torch::kBilinear)
+                                      .padding_mode(torch::kBorder)
+                                      .align_corners(true));
   return out.squeeze(2).permute({2, 0, 1});  // (N, V, C)
 }
 

@@ -99,10 +99,11 @@ struct EncodedViews {
 // level (METHOD 9: a linear layer commutes with bilinear upsampling and sampling). Sampled with
 // PixelReadout::sample it equals linear(grid_sample(pixel_features)) up to float rounding.
 struct PixelReadout {
-  torch::Tensor table;         // (sum_l V h_l w_l, Cout) level maps, channels-last, stacked
-  torch::Tensor image_table;   // (V H W, 3) the raw images, channels-last (no gradient)
-  torch::Tensor image_weight;  // (Cout, 3) composed weight of the raw-RGB channels; undefined w/o RGB
-  torch::Tensor bias;          // (Cout)
+  torch::Tensor table;        // (sum_l V h_l w_l, Cout) level maps, channels-last, stacked
+  torch::Tensor image_table;  // (V H W, 3) the raw images, channels-last (no gradient)
+  torch::Tensor
+      image_weight;    // (Cout, 3) composed weight of the raw-RGB channels; undefined w/o RGB
+  torch::Tensor bias;  // (Cout)
   torch::Tensor table_grad_sink;  // optional, see weighted_gather
 
   // level_taps/image_taps from PixelGeometry for M points; returns (M, Cout).
@@ -168,10 +169,12 @@ class EncoderImpl : public torch::nn::Module {
 
   // Loads torchvision resnet18 weights (names conv1.weight, bn1.running_mean, layer1.0...;
   // layer3/layer4/fc are ignored). Throws th::Error naming a missing or mis-shaped key.
-  void load_resnet_state(const std::map<std::string, torch::Tensor>& state, const std::string& source);
+  void load_resnet_state(const std::map<std::string, torch::Tensor>& state,
+                         const std::string& source);
 
   ResNetTrunk model{nullptr};
-  torch::nn::Conv2d reduction_layer{nullptr}, upsample_color{nullptr};  // upsample_color: null w/o RGB
+  torch::nn::Conv2d reduction_layer{nullptr},
+      upsample_color{nullptr};  // upsample_color: null w/o RGB
 };
 TORCH_MODULE(Encoder);
 

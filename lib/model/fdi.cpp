@@ -15,7 +15,8 @@ namespace {
 // Sixteen independent partial sums, so that the compiler vectorises the reduction (a plain
 // running sum is a dependency chain it must keep in order).
 template <class T>
-inline __attribute__((always_inline)) T dot(const T* __restrict a, const T* __restrict b, int64_t c) {
+inline __attribute__((always_inline)) T dot(const T* __restrict a, const T* __restrict b,
+                                            int64_t c) {
   T acc[16] = {};
   int64_t i = 0;
   for (; i + 16 <= c; i += 16)
@@ -27,24 +28,28 @@ inline __attribute__((always_inline)) T dot(const T* __restrict a, const T* __re
 }
 
 template <class T>
-inline __attribute__((always_inline)) void axpy(T* __restrict y, T a, const T* __restrict x, int64_t c) {
+inline __attribute__((always_inline)) void axpy(T* __restrict y, T a, const T* __restrict x,
+                                                int64_t c) {
   for (int64_t i = 0; i < c; ++i) y[i] += a * x[i];
 }
 
 // Forward of points [b, e): QR, KV (N, V, W) rows, W = d + C; O (N, V, C) holds r on entry and
 // the output on return; A (N, V, V) receives the attention weights.
 template <class T>
-inline __attribute__((always_inline)) void attend_rows(const T* QR, const T* KV, T* O, T* A, int64_t b, int64_t e,
-                                                       int64_t V, int64_t d, int64_t C, T scale) {
+inline __attribute__((always_inline)) void attend_rows(const T* QR, const T* KV, T* O, T* A,
+                                                       int64_t b, int64_t e, int64_t V, int64_t d,
+                                                       int64_t C, T scale) {
   const int64_t W = d + C;
   for (int64_t n = b; n < e; ++n) {
     T* a = A + n * V * V;
     for (int64_t v = 0; v < V; ++v) {
       const T* q = QR + (n * V + v) * W;
       T m = -std::numeric_limits<T>::infinity(), s = 0;
-      for (int64_t j = 0; j < V; ++j) m = std::max(m, a[v * V + j] = dot(q, KV + (n * V + j) * W, d) * scale);
+      for (int64_t j = 0; j < V; ++j)
+        m = std::max(m, a[v * V + j] = dot(q, KV + (n * V + j) * W, d) * scale);
       for (int64_t j = 0; j < V; ++j) s += (a[v * V + j] = std::exp(a[v * V + j] - m));
-      for (int64_t j = 0; j < V; ++j) axpy(O + (n * V + v) * C, a[v * V + j] /= s, KV + (n * V + j) * W + d, C);
+      for (int64_t j = 0; j < V; ++j)
+        axpy(O + (n * V + v) * C, a[v * V + j] /= s, KV + (n * V + j) * W + d, C);
     }
   }
 }
@@ -52,9 +57,11 @@ inline __attribute__((always_inline)) void attend_rows(const T* QR, const T* KV,
 // Backward of points [b, e): G (N, V, C) output gradient; GQR, GKV (N, V, W) receive the
 // gradients of the q and k parts (GKV's u part too); ga is V * V scratch.
 template <class T>
-inline __attribute__((always_inline)) void attend_rows_backward(const T* QR, const T* KV, const T* A, const T* G,
-                                                                T* GQR, T* GKV, T* ga, int64_t b, int64_t e,
-                                                                int64_t V, int64_t d, int64_t C, T scale) {
+inline __attribute__((always_inline)) void attend_rows_backward(const T* QR, const T* KV,
+                                                                const T* A, const T* G, T* GQR,
+                                                                T* GKV, T* ga, int64_t b, int64_t e,
+                                                                int64_t V, int64_t d, int64_t C,
+                                                                T scale) {
   const int64_t W = d + C;
   for (int64_t n = b; n < e; ++n) {
     const T* a = A + n * V * V;
@@ -77,31 +84,31 @@ inline __attribute__((always_inline)) void attend_rows_backward(const T* QR, con
 
 // float: one clone per vector width, chosen at run time (the project builds for baseline x86-64).
 __attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_f(
-    const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
-    float scale) {
+    const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e, int64_t V,
+    int64_t d, int64_t C, float scale) {
   attend_rows<float>(QR, KV, O, A, b, e, V, d, C, scale);
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_backward_f(
-    const float* QR, const float* KV, const float* A, const float* G, float* GQR, float* GKV, float* ga, int64_t b,
-    int64_t e, int64_t V, int64_t d, int64_t C, float scale) {
+    const float* QR, const float* KV, const float* A, const float* G, float* GQR, float* GKV,
+    float* ga, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C, float scale) {
   attend_rows_backward<float>(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
 }
-void attend_rows_any(const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e, int64_t V,
-                     int64_t d, int64_t C, float scale) {
+void attend_rows_any(const float* QR, const float* KV, float* O, float* A, int64_t b, int64_t e,
+                     int64_t V, int64_t d, int64_t C, float scale) {
   attend_rows_f(QR, KV, O, A, b, e, V, d, C, scale);
 }
-void attend_rows_any(const double* QR, const double* KV, double* O, double* A, int64_t b, int64_t e, int64_t V,
-                     int64_t d, int64_t C, double scale) {
+void attend_rows_any(const double* QR, const double* KV, double* O, double* A, int64_t b, int64_t e,
+                     int64_t V, int64_t d, int64_t C, double scale) {
   attend_rows<double>(QR, KV, O, A, b, e, V, d, C, scale);
 }
-void attend_rows_backward_any(const float* QR, const float* KV, const float* A, const float* G, float* GQR,
-                              float* GKV, float* ga, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
-                              float scale) {
+void attend_rows_backward_any(const float* QR, const float* KV, const float* A, const float* G,
+                              float* GQR, float* GKV, float* ga, int64_t b, int64_t e, int64_t V,
+                              int64_t d, int64_t C, float scale) {
   attend_rows_backward_f(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
 }
-void attend_rows_backward_any(const double* QR, const double* KV, const double* A, const double* G, double* GQR,
-                              double* GKV, double* ga, int64_t b, int64_t e, int64_t V, int64_t d, int64_t C,
-                              double scale) {
+void attend_rows_backward_any(const double* QR, const double* KV, const double* A, const double* G,
+                              double* GQR, double* GKV, double* ga, int64_t b, int64_t e, int64_t V,
+                              int64_t d, int64_t C, double scale) {
   attend_rows_backward<double>(QR, KV, A, G, GQR, GKV, ga, b, e, V, d, C, scale);
 }
 
@@ -149,7 +156,8 @@ struct ViewAttention : torch::autograd::Function<ViewAttention> {
       scalar_t* GKV = gkv.data_ptr<scalar_t>();
       at::parallel_for(0, N, 64, [&](int64_t b, int64_t e) {
         std::vector<scalar_t> ga(V * V);
-        attend_rows_backward_any(QR, KV, A, G, GQR, GKV, ga.data(), b, e, V, d, C, static_cast<scalar_t>(scale));
+        attend_rows_backward_any(QR, KV, A, G, GQR, GKV, ga.data(), b, e, V, d, C,
+                                 static_cast<scalar_t>(scale));
       });
     });
     return {gqr, gkv, torch::Tensor()};
@@ -170,9 +178,12 @@ FDIImpl::FDIImpl(const FDIConfig& config, int64_t pixel_channels) {
   }
   fc_1 = register_module("fc_1", torch::nn::Linear(256, 256));
   fc_2 = register_module("fc_2", torch::nn::Linear(256, 256));
-  if (config.appearance && config.human) fusion_ = {&FDIImpl::cross, &FDIImpl::cross_folded, &FDIImpl::fold_cross};
-  else if (config.appearance) fusion_ = {&FDIImpl::self, &FDIImpl::self_folded, &FDIImpl::fold_self};
-  else fusion_ = {&FDIImpl::human_only, &FDIImpl::human_only_folded, &FDIImpl::fold_human_only};
+  if (config.appearance && config.human)
+    fusion_ = {&FDIImpl::cross, &FDIImpl::cross_folded, &FDIImpl::fold_cross};
+  else if (config.appearance)
+    fusion_ = {&FDIImpl::self, &FDIImpl::self_folded, &FDIImpl::fold_self};
+  else
+    fusion_ = {&FDIImpl::human_only, &FDIImpl::human_only_folded, &FDIImpl::fold_human_only};
 }
 
 torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k) {
@@ -181,11 +192,12 @@ torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k)
 }
 
 torch::Tensor FDIImpl::attend(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d) {
-  TORCH_CHECK(qr.dim() == 3 && qr.sizes() == kv.sizes(), "attend: qr and kv must be (N, V, d + C), got ",
-              qr.sizes(), " and ", kv.sizes());
+  TORCH_CHECK(qr.dim() == 3 && qr.sizes() == kv.sizes(),
+              "attend: qr and kv must be (N, V, d + C), got ", qr.sizes(), " and ", kv.sizes());
   if (!qr.device().is_cpu()) {
     const int64_t C = qr.size(2) - d;
-    return torch::baddbmm(qr.narrow(2, d, C), attention(qr.narrow(2, 0, d), kv.narrow(2, 0, d)), kv.narrow(2, d, C));
+    return torch::baddbmm(qr.narrow(2, d, C), attention(qr.narrow(2, 0, d), kv.narrow(2, 0, d)),
+                          kv.narrow(2, d, C));
   }
   return ViewAttention::apply(qr, kv, d);
 }
@@ -223,14 +235,14 @@ torch::Tensor FDIImpl::human_only(const torch::Tensor& s, const torch::Tensor&, 
 
 // ---- the folded form ---------------------------------------------------------------------------
 
-torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
-                                      const Products& P) {
+torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s,
+                                      const torch::Tensor& a, const Products& P) {
   auto pre = (this->*fusion_.fuse_folded)(f, s, a, P);
   return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();
 }
 
-torch::Tensor FDIImpl::cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
-                                    const Products& P) {
+torch::Tensor FDIImpl::cross_folded(const FDIFolded& f, const torch::Tensor& s,
+                                    const torch::Tensor& a, const Products& P) {
   // (N, V, 128 + 256) each; the attention kernel takes fp32
   const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
   const auto qr = Products::fp32(P.linear(s, f.w1, f.b1));
@@ -244,8 +256,8 @@ torch::Tensor FDIImpl::self_folded(const FDIFolded& f, const torch::Tensor&, con
   return torch::baddbmm(u + fc_1->bias, attention(k, k), u);
 }
 
-torch::Tensor FDIImpl::human_only_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor&,
-                                         const Products& P) {
+torch::Tensor FDIImpl::human_only_folded(const FDIFolded& f, const torch::Tensor& s,
+                                         const torch::Tensor&, const Products& P) {
   return P.linear(s, f.w1, f.b1);
 }
 

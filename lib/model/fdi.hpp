@@ -25,11 +25,12 @@ class FDIImpl : public torch::nn::Module {
 
   // The reference computation. s, a: (N, V, 256) (undefined when the branch is off)
   // -> e: (N, V, 256), in the products' compute type (model/precision.hpp).
-  torch::Tensor forward(const torch::Tensor& s, const torch::Tensor& a, const Products& products = {});
+  torch::Tensor forward(const torch::Tensor& s, const torch::Tensor& a,
+                        const Products& products = {});
 
   // The same from folded weights (fewer matrix products; model/shortcuts.hpp folds them).
-  torch::Tensor forward_folded(const FDIFolded& folded, const torch::Tensor& s, const torch::Tensor& a,
-                               const Products& products = {});
+  torch::Tensor forward_folded(const FDIFolded& folded, const torch::Tensor& s,
+                               const torch::Tensor& a, const Products& products = {});
 
   // softmax over the key views j of q_v . k_j / sqrt(d): q (N, V, d), k (N, V, d) -> (N, V, V)
   // indexed [n, v (query), j (key)].
@@ -42,7 +43,7 @@ class FDIImpl : public torch::nn::Module {
   // The folded weights of this fusion (model/shortcuts.hpp folds them once per frame).
   FDIFolded fold() const { return (this->*fusion_.fold)(); }
 
-  torch::nn::Linear alpha_res_0{nullptr};       // appearance: p_v -> a_v (384 -> 256)
+  torch::nn::Linear alpha_res_0{nullptr};            // appearance: p_v -> a_v (384 -> 256)
   torch::nn::Linear key0{nullptr}, value0{nullptr};  // appearance side (spatial_key_value_0)
   torch::nn::Linear key1{nullptr}, value1{nullptr};  // query side (spatial_key_value_1)
   torch::nn::Linear fc_1{nullptr}, fc_2{nullptr};
@@ -52,23 +53,26 @@ class FDIImpl : public torch::nn::Module {
   // layers, fc_1's input pre-activation from folded weights, and the folding itself. Chosen
   // once in the constructor from FDIConfig.
   struct Fusion {
-    torch::Tensor (FDIImpl::*fuse)(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
-    torch::Tensor (FDIImpl::*fuse_folded)(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
-                                          const Products& p);
+    torch::Tensor (FDIImpl::*fuse)(const torch::Tensor& s, const torch::Tensor& a,
+                                   const Products& p);
+    torch::Tensor (FDIImpl::*fuse_folded)(const FDIFolded& f, const torch::Tensor& s,
+                                          const torch::Tensor& a, const Products& p);
     FDIFolded (FDIImpl::*fold)() const;
   };
   // Cross-attention over the views: queries from s, keys and values from a (the paper's).
   torch::Tensor cross(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
-  torch::Tensor cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  torch::Tensor cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                             const Products& p);
   FDIFolded fold_cross() const;
   // "w/o h": self-attention of the appearance features.
   torch::Tensor self(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
-  torch::Tensor self_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a, const Products& p);
+  torch::Tensor self_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                            const Products& p);
   FDIFolded fold_self() const;
   // "w/o a": o_v = value1(s_v).
   torch::Tensor human_only(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
-  torch::Tensor human_only_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
-                                  const Products& p);
+  torch::Tensor human_only_folded(const FDIFolded& f, const torch::Tensor& s,
+                                  const torch::Tensor& a, const Products& p);
   FDIFolded fold_human_only() const;
 
   Fusion fusion_;

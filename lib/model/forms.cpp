@@ -39,7 +39,9 @@ class PixelMapForm final : public PixelForm {
 class PixelLevelsForm final : public PixelForm {
  public:
   PixelLevelsForm(Encoder encoder, FDI fdi) : encoder_(std::move(encoder)), fdi_(std::move(fdi)) {}
-  PixelStage prepare(const PixelFrame& f, const NetworkStage&) const override { return PixelLevels{f.enc}; }
+  PixelStage prepare(const PixelFrame& f, const NetworkStage&) const override {
+    return PixelLevels{f.enc};
+  }
   torch::Tensor appearance(const PixelStage& stage, const torch::Tensor& uv) const override {
     return F::linear(colour(stage, uv), fdi_->alpha_res_0->weight, fdi_->alpha_res_0->bias);
   }
@@ -61,7 +63,8 @@ class ReadoutForm final : public PixelForm {
 
   PixelStage prepare(const PixelFrame& f, const NetworkStage& network) const override {
     const auto& heads = std::get<FoldedWeights>(network).heads;
-    if (windows_ && !torch::GradMode::is_enabled() && f.enc.images.device().is_cpu() && f.cull_distance > 0) {
+    if (windows_ && !torch::GradMode::is_enabled() && f.enc.images.device().is_cpu() &&
+        f.cull_distance > 0) {
       const auto windows = body_windows(f.geometry, f.vertices, f.cull_distance, f.enc.geometry);
       return make_window_readouts(*encoder_, f.enc, *fdi_, heads, windows);
     }
@@ -79,12 +82,15 @@ class ReadoutForm final : public PixelForm {
   }
 
  private:
-  static torch::Tensor read(const PixelReadouts& px, const PixelReadout& readout, const torch::Tensor& uv) {
+  static torch::Tensor read(const PixelReadouts& px, const PixelReadout& readout,
+                            const torch::Tensor& uv) {
     const auto [flat, view] = PixelGeometry::point_view_rows(uv);
-    return readout.sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
+    return readout
+        .sample(px.geometry.stacked_level_taps(flat, view), px.geometry.image_taps(flat, view))
         .view({uv.size(0), uv.size(1), -1});
   }
-  torch::Tensor read(const WindowReadouts& px, const WindowReadout& readout, const torch::Tensor& uv) const {
+  torch::Tensor read(const WindowReadouts& px, const WindowReadout& readout,
+                     const torch::Tensor& uv) const {
     const auto [flat, view] = PixelGeometry::point_view_rows(uv);
     const auto& g = px.levels.enc.geometry;
     const auto [taps, inside] = px.windows.taps(flat, view, g.height, g.width);
@@ -92,7 +98,8 @@ class ReadoutForm final : public PixelForm {
     if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
       const auto idx = (~inside).nonzero().flatten();
       const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
-      const auto p = encoder_->sample_pixel_features(px.levels.enc, g.stacked_level_taps(f, v), g.image_taps(f, v));
+      const auto p = encoder_->sample_pixel_features(px.levels.enc, g.stacked_level_taps(f, v),
+                                                     g.image_taps(f, v));
       out.index_copy_(0, idx, F::linear(p, readout.weight, readout.layer_bias));
     }
     return out.view({uv.size(0), uv.size(1), -1});
@@ -132,9 +139,11 @@ class FoldedNetwork final : public NetworkForm {
                       const Products& products) const override {
     return fdi_->forward_folded(std::get<FoldedWeights>(stage).fdi, s, a, products);
   }
-  torch::Tensor colour(const NetworkStage& stage, const torch::Tensor& e, const torch::Tensor& pixels,
-                       const torch::Tensor& dir_code, const Products& products) const override {
-    return heads_->color_folded(std::get<FoldedWeights>(stage).heads, e, pixels, dir_code, products);
+  torch::Tensor colour(const NetworkStage& stage, const torch::Tensor& e,
+                       const torch::Tensor& pixels, const torch::Tensor& dir_code,
+                       const Products& products) const override {
+    return heads_->color_folded(std::get<FoldedWeights>(stage).heads, e, pixels, dir_code,
+                                products);
   }
 
  private:
@@ -146,7 +155,8 @@ class FoldedNetwork final : public NetworkForm {
 
 std::unique_ptr<PixelForm> make_pixel_form(const ModelConfig& config, Encoder encoder, FDI fdi) {
   if (!config.fdi.appearance) return std::make_unique<NoPixelForm>();
-  if (config.exact_shortcuts) return std::make_unique<ReadoutForm>(encoder, fdi, config.readout_windows);
+  if (config.exact_shortcuts)
+    return std::make_unique<ReadoutForm>(encoder, fdi, config.readout_windows);
   if (config.encoder.fast_sampling) return std::make_unique<PixelLevelsForm>(encoder, fdi);
   return std::make_unique<PixelMapForm>(encoder, fdi);
 }

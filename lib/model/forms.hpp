@@ -52,11 +52,12 @@ class NetworkForm {
   virtual ~NetworkForm() = default;
   virtual NetworkStage prepare() const = 0;
   // FDI: s, a (N, V, 256) (undefined when the branch is off) -> e (N, V, 256).
-  virtual torch::Tensor trunk(const NetworkStage& stage, const torch::Tensor& s, const torch::Tensor& a,
-                              const Products& products) const = 0;
+  virtual torch::Tensor trunk(const NetworkStage& stage, const torch::Tensor& s,
+                              const torch::Tensor& a, const Products& products) const = 0;
   // The colour head: e, the pixel form's colour() output and gamma(d) (N, 27) -> rgb logits (N, 3).
-  virtual torch::Tensor colour(const NetworkStage& stage, const torch::Tensor& e, const torch::Tensor& pixels,
-                               const torch::Tensor& dir_code, const Products& products) const = 0;
+  virtual torch::Tensor colour(const NetworkStage& stage, const torch::Tensor& e,
+                               const torch::Tensor& pixels, const torch::Tensor& dir_code,
+                               const Products& products) const = 0;
 };
 
 // The forms for a config (the modules are the model's own; the forms keep references to them).
@@ -65,7 +66,8 @@ std::unique_ptr<NetworkForm> make_network_form(const ModelConfig& config, FDI fd
 
 // How the body is painted (METHOD 3.1): sampled from the levels (encoder.fast_sampling) or the
 // reference's materialised reduction map.
-using PaintFn = torch::Tensor (EncoderImpl::*)(const EncodedViews&, const torch::Tensor&, const torch::Tensor&) const;
+using PaintFn = torch::Tensor (EncoderImpl::*)(const EncodedViews&, const torch::Tensor&,
+                                               const torch::Tensor&) const;
 PaintFn paint_form(const ModelConfig& config);
 
 }  // namespace th::model

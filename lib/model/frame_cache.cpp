@@ -41,8 +41,8 @@ void SPCStage::visit(const TensorVisitor& fn) {
 }
 
 void FoldedWeights::visit(const TensorVisitor& fn) {
-  for (auto* t : {&fdi.w0, &fdi.b0, &fdi.w1, &fdi.b1, &heads.e_weight, &heads.e_bias, &heads.readout_weight,
-                  &heads.readout_bias})
+  for (auto* t : {&fdi.w0, &fdi.b0, &fdi.w1, &fdi.b1, &heads.e_weight, &heads.e_bias,
+                  &heads.readout_weight, &heads.readout_bias})
     fn(*t, nullptr);
 }
 

@@ -36,8 +36,9 @@ class HeadsImpl : public torch::nn::Module {
 
   // The same from folded weights (fold() below). readout: (N, V, 256) = the folded readout of
   // p_v (undefined w/o appearance).
-  torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e, const torch::Tensor& readout,
-                             const torch::Tensor& dir_code, const Products& products = {}) {
+  torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e,
+                             const torch::Tensor& readout, const torch::Tensor& dir_code,
+                             const Products& products = {}) {
     return (this->*form_.color_folded)(folded, e, readout, dir_code, products);
   }
 
@@ -52,20 +53,23 @@ class HeadsImpl : public torch::nn::Module {
  private:
   // The colour head with the residuals from p_v, or without them ("w/o a"), in its three forms.
   struct Form {
-    torch::Tensor (HeadsImpl::*color)(const torch::Tensor&, const torch::Tensor&, const torch::Tensor&,
-                                      const Products&);
-    torch::Tensor (HeadsImpl::*color_folded)(const HeadsFolded&, const torch::Tensor&, const torch::Tensor&,
-                                             const torch::Tensor&, const Products&);
+    torch::Tensor (HeadsImpl::*color)(const torch::Tensor&, const torch::Tensor&,
+                                      const torch::Tensor&, const Products&);
+    torch::Tensor (HeadsImpl::*color_folded)(const HeadsFolded&, const torch::Tensor&,
+                                             const torch::Tensor&, const torch::Tensor&,
+                                             const Products&);
     HeadsFolded (HeadsImpl::*fold)() const;
   };
-  torch::Tensor color_pixels(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code,
-                             const Products& products);
-  torch::Tensor color_plain(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code,
-                            const Products& products);
-  torch::Tensor color_folded_pixels(const HeadsFolded& f, const torch::Tensor& e, const torch::Tensor& readout,
-                                    const torch::Tensor& dir_code, const Products& products);
-  torch::Tensor color_folded_plain(const HeadsFolded& f, const torch::Tensor& e, const torch::Tensor& readout,
-                                   const torch::Tensor& dir_code, const Products& products);
+  torch::Tensor color_pixels(const torch::Tensor& e, const torch::Tensor& p,
+                             const torch::Tensor& dir_code, const Products& products);
+  torch::Tensor color_plain(const torch::Tensor& e, const torch::Tensor& p,
+                            const torch::Tensor& dir_code, const Products& products);
+  torch::Tensor color_folded_pixels(const HeadsFolded& f, const torch::Tensor& e,
+                                    const torch::Tensor& readout, const torch::Tensor& dir_code,
+                                    const Products& products);
+  torch::Tensor color_folded_plain(const HeadsFolded& f, const torch::Tensor& e,
+                                   const torch::Tensor& readout, const torch::Tensor& dir_code,
+                                   const Products& products);
   HeadsFolded fold_pixels() const;
   HeadsFolded fold_plain() const;
   // Both colour forms: view_fc's direction part, and the tail fc_4, rgb_fc on the view mean.

@@ -24,7 +24,8 @@ class HumanRepresentation : public torch::nn::Module {
   virtual HumanStage prepare(const FrameInputs& in, const PaintedBody& body) = 0;
   // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32; its
   // products as `products` says (model/precision.hpp). `stage` is what prepare() made.
-  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) = 0;
+  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                                const Products& products) = 0;
 };
 
 // TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*),
@@ -34,7 +35,8 @@ class TokenFieldsImpl : public HumanRepresentation {
   explicit TokenFieldsImpl(const ModelConfig& config);
 
   HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                        const Products& products) override;
 
   TransHE vit{nullptr};  // null: the "w/o TransHE" ablation
   torch::nn::Linear fc_0{nullptr};
@@ -55,7 +57,8 @@ class TokenTableImpl : public TokenFieldsImpl {
  public:
   using TokenFieldsImpl::TokenFieldsImpl;
   HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs, const Products& products) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                        const Products& products) override;
 };
 
 // Factory: the representation named by config.representation, in the form config.exact_shortcuts

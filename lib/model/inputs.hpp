@@ -19,7 +19,7 @@ struct FrameInputs {
   torch::Tensor Th;          // (3) global translation, metres
   torch::Tensor A;           // (Nv, 3, 3) blended canonical -> posed rotations (METHOD 2.3)
   torch::Tensor canonical;   // (Nv, 3) canonical vertices (v_template); float64 keeps the token
-                             // positions, hence the high PE frequencies, as the reference's [parity]
+                            // positions, hence the high PE frequencies, as the reference's [parity]
   torch::Tensor visibility;  // (V, Nv) bool, vertex visible in reference view v (METHOD 2.4)
   torch::Tensor labels;      // (Nv) int64 token (cluster) of each vertex (METHOD 2.5)
   int64_t num_tokens = 0;    // number of clusters; 0: labels.max() + 1

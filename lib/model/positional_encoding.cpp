@@ -1,8 +1,7 @@
 #include "model/positional_encoding.hpp"
 
-#include <torch/torch.h>
-
 #include <ATen/Parallel.h>
+#include <torch/torch.h>
 
 #include <cmath>
 

@@ -1,8 +1,8 @@
 #include "model/precision.hpp"
 
 #include <ATen/Context.h>
-#include <torch/csrc/autograd/custom_function.h>
 #include <spdlog/spdlog.h>
+#include <torch/csrc/autograd/custom_function.h>
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -17,8 +17,10 @@ namespace {
 namespace F = torch::nn::functional;
 
 // x2 (M, in) fp32 -> (M, out) through oneDNN: dense -> oneDNN layout, product, back to dense.
-torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w, const torch::Tensor& b) {
-  const c10::optional<torch::Tensor> bias = b.defined() ? c10::optional<torch::Tensor>(b) : c10::nullopt;
+torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w,
+                             const torch::Tensor& b) {
+  const c10::optional<torch::Tensor> bias =
+      b.defined() ? c10::optional<torch::Tensor>(b) : c10::nullopt;
   return at::mkldnn_linear(x2.contiguous().to_mkldnn(), w.contiguous(), bias).to_dense();
 }
 
@@ -63,7 +65,8 @@ bool onednn_products_agree() {
   return agree;
 }
 
-torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b) const {
+torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w,
+                               const torch::Tensor& b) const {
   if (bf16()) {
     const auto t = torch::kBFloat16;
     return F::linear(x.to(t), w.to(t), b.defined() ? b.to(t) : b);
@@ -71,16 +74,18 @@ torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w, c
   return linear_fp32(x, w, b);
 }
 
-torch::Tensor Products::linear_fp32(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b) const {
+torch::Tensor Products::linear_fp32(const torch::Tensor& x, const torch::Tensor& w,
+                                    const torch::Tensor& b) const {
   const auto xf = fp32(x);
   const int64_t in = xf.size(-1), rows = in > 0 ? xf.numel() / in : 0;
-  if (!onednn || !xf.device().is_cpu() || rows < kOneDnnMinRows || xf.scalar_type() != torch::kFloat)
+  if (!onednn || !xf.device().is_cpu() || rows < kOneDnnMinRows ||
+      xf.scalar_type() != torch::kFloat)
     return F::linear(xf, w, b);
   auto sizes = xf.sizes().vec();
   sizes.back() = w.size(0);
   const auto x2 = xf.reshape({rows, in});
-  const bool grad = torch::GradMode::is_enabled() && (x2.requires_grad() || w.requires_grad() ||
-                                                      (b.defined() && b.requires_grad()));
+  const bool grad = torch::GradMode::is_enabled() &&
+                    (x2.requires_grad() || w.requires_grad() || (b.defined() && b.requires_grad()));
   return (grad ? OneDnnLinear::apply(x2, w, b.defined() ? b : torch::empty({0}, w.options()))
                : onednn_product(x2, w, b))
       .view(sizes);
@@ -102,8 +107,8 @@ enum class Asked { fp32, bf16, automatic };
 enum class Backend { automatic, onednn, blas };
 
 template <class E>
-E parse(const std::string& what, const std::string& text, std::initializer_list<std::pair<const char*, E>> names,
-        const char* expected) {
+E parse(const std::string& what, const std::string& text,
+        std::initializer_list<std::pair<const char*, E>> names, const char* expected) {
   for (const auto& [name, value] : names)
     if (text == name) return value;
   fail(what, " '", text, "': expected ", expected);
@@ -113,18 +118,22 @@ E parse(const std::string& what, const std::string& text, std::initializer_list<
 
 Products resolve_products(const std::string& precision_text, const std::string& fp32_products_text,
                           const torch::Device& device, std::string* why, std::string* warning) {
-  const auto precision = parse<Asked>("precision", precision_text,
-                                      {{"fp32", Asked::fp32}, {"bf16", Asked::bf16}, {"auto", Asked::automatic}},
-                                      "fp32, bf16 or auto");
-  const auto backend = parse<Backend>("fp32_products", fp32_products_text,
-                                      {{"auto", Backend::automatic}, {"onednn", Backend::onednn}, {"blas", Backend::blas}},
-                                      "auto, onednn or blas");
+  const auto precision =
+      parse<Asked>("precision", precision_text,
+                   {{"fp32", Asked::fp32}, {"bf16", Asked::bf16}, {"auto", Asked::automatic}},
+                   "fp32, bf16 or auto");
+  const auto backend = parse<Backend>(
+      "fp32_products", fp32_products_text,
+      {{"auto", Backend::automatic}, {"onednn", Backend::onednn}, {"blas", Backend::blas}},
+      "auto, onednn or blas");
   const bool cpu = device.is_cpu();
   if (backend == Backend::onednn && cpu && !at::hasMKLDNN())
     fail("fp32_products 'onednn': the linked LibTorch is built without oneDNN (use auto or blas)");
   if (backend == Backend::onednn && cpu && !onednn_products_agree())
-    fail("fp32_products 'onednn': this LibTorch's oneDNN product (mkldnn_linear) disagrees with BLAS on a ",
-         "probe product (use auto or blas)");
+    fail(
+        "fp32_products 'onednn': this LibTorch's oneDNN product (mkldnn_linear) disagrees with "
+        "BLAS on a ",
+        "probe product (use auto or blas)");
   Products p;
   p.onednn = cpu && backend != Backend::blas && at::hasMKLDNN() && onednn_products_agree();
   const bool onednn_refused = cpu && backend == Backend::automatic && at::hasMKLDNN() && !p.onednn;
@@ -136,23 +145,29 @@ Products resolve_products(const std::string& precision_text, const std::string& 
     p.precision = Precision::bf16;
     reason = "precision: bf16";
     if (cpu && !bf16.native() && warning)
-      *warning = "precision: bf16 on a processor without native bf16 dot products (" + bf16.describe() +
-                 "): the products are emulated and run slower than fp32";
+      *warning = "precision: bf16 on a processor without native bf16 dot products (" +
+                 bf16.describe() + "): the products are emulated and run slower than fp32";
   } else if (!cpu) {
-    reason = "precision: auto on " + device.str() + " keeps fp32 (set precision: bf16 for autocast)";
+    reason =
+        "precision: auto on " + device.str() + " keeps fp32 (set precision: bf16 for autocast)";
   } else if (bf16.native()) {
     p.precision = Precision::bf16;
     reason = "precision: auto -> bf16: the processor has " + bf16.describe();
   } else {
-    reason = "precision: auto -> fp32: the processor has " + bf16.describe() + ", no native bf16 dot products";
+    reason = "precision: auto -> fp32: the processor has " + bf16.describe() +
+             ", no native bf16 dot products";
   }
   if (why)
-    *why = reason + " | " + p.describe() +
-           (onednn_refused ? " (oneDNN's mkldnn_linear disagrees with BLAS on a probe product in this LibTorch)" : "");
+    *why =
+        reason + " | " + p.describe() +
+        (onednn_refused
+             ? " (oneDNN's mkldnn_linear disagrees with BLAS on a probe product in this LibTorch)"
+             : "");
   return p;
 }
 
-Products select_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device) {
+Products select_products(const std::string& precision, const std::string& fp32_products,
+                         const torch::Device& device) {
   std::string why, warning;
   const auto p = resolve_products(precision, fp32_products, device, &why, &warning);
   spdlog::info("{}", why);

@@ -3,16 +3,17 @@
 // here and nowhere else; the stages call Products::linear for their products and
 // FrameAutocast around the per-frame modules, and never cast on their own.
 //
-// | work                                                        | fp32            | bf16                        |
+// | work                                                        | fp32            | bf16 |
 // |-------------------------------------------------------------|-----------------|-----------------------------|
-// | per-point products: FDI's key/value projections and fc_2,   | fp32: oneDNN or | bf16 operands, fp32         |
-// |   the density head's fc_3, the colour head's feature product|   BLAS (below)  |   accumulation (oneDNN)     |
-// | per-frame modules: ResNet encoder, TransHE (convolutions,   | fp32            | autocast to bf16; outputs   |
-// |   linear layers, attention products)                        |                 |   cast back to fp32         |
-// | positional encodings, DPaRF's distances, nearest fields and | fp32            | fp32                        |
-// |   weights, gathers of tables, the view attention's softmax, |                 |                             |
-// |   the last layers of both heads, compositing, losses,       |                 |                             |
-// |   metrics, optimiser state and master weights, checkpoints  |                 |                             |
+// | per-point products: FDI's key/value projections and fc_2,   | fp32: oneDNN or | bf16 operands,
+// fp32         | |   the density head's fc_3, the colour head's feature product|   BLAS (below)  |
+// accumulation (oneDNN)     | | per-frame modules: ResNet encoder, TransHE (convolutions,   | fp32
+// | autocast to bf16; outputs   | |   linear layers, attention products)                        |
+// |   cast back to fp32         | | positional encodings, DPaRF's distances, nearest fields and |
+// fp32            | fp32                        | |   weights, gathers of tables, the view
+// attention's softmax, |                 |                             | |   the last layers of
+// both heads, compositing, losses,       |                 |                             | |
+// metrics, optimiser state and master weights, checkpoints  |                 | |
 //
 // A bf16 product's output stays bf16 only where another product or a ReLU follows; the
 // project's own kernels (the view attention, weighted gathers) take fp32, so their inputs are
@@ -43,11 +44,13 @@ struct Products {
   // y = x w^T + b: x (..., in) fp32 or bf16, w (out, in) and b (out) fp32 (b may be undefined)
   // -> (..., out) in the compute type (bf16 under bf16). Differentiable in x, w and b. A float64
   // model (gradient checks) computes in float64 under fp32 and never through oneDNN.
-  torch::Tensor linear(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b = {}) const;
+  torch::Tensor linear(const torch::Tensor& x, const torch::Tensor& w,
+                       const torch::Tensor& b = {}) const;
   // The same in fp32 whatever the precision (the heads' last layers, the small per-point
   // products), through oneDNN when `onednn`: the per-point loop then never wakes BLAS's own
   // thread pool, whose waiting threads would compete with oneDNN's for the cores.
-  torch::Tensor linear_fp32(const torch::Tensor& x, const torch::Tensor& w, const torch::Tensor& b = {}) const;
+  torch::Tensor linear_fp32(const torch::Tensor& x, const torch::Tensor& w,
+                            const torch::Tensor& b = {}) const;
   // x in fp32 when it is bf16 or fp16; fp32 and float64 tensors (gradient checks) unchanged.
   static torch::Tensor fp32(const torch::Tensor& x);
   // "fp32 (oneDNN products)", "bf16" ...
@@ -65,11 +68,13 @@ bool onednn_products_agree();
 // bf16 support, fp32 elsewhere. `why` (optional) receives one line saying which and why; an
 // explicit bf16 on a processor without those instructions runs emulated and `warning` says so.
 // A bad value is a th::Error naming it.
-Products resolve_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device,
-                          std::string* why = nullptr, std::string* warning = nullptr);
+Products resolve_products(const std::string& precision, const std::string& fp32_products,
+                          const torch::Device& device, std::string* why = nullptr,
+                          std::string* warning = nullptr);
 
 // resolve_products for the config's keys, with its line logged (and its warning, if any).
-Products select_products(const std::string& precision, const std::string& fp32_products, const torch::Device& device);
+Products select_products(const std::string& precision, const std::string& fp32_products,
+                         const torch::Device& device);
 
 // Autocast to bf16 on `device` while alive, when `products` asks for bf16 (the per-frame
 // modules); nothing otherwise. Restores the previous autocast state.

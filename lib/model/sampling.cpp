@@ -126,14 +126,16 @@ torch::Tensor gather_forward_cpu(const torch::Tensor& table, const torch::Tensor
 void gather_backward_cpu(const torch::Tensor& grad_out, const torch::Tensor& index,
                          const torch::Tensor& weight, torch::Tensor& grad_table) {
   const int64_t M = index.size(0), T_ = index.size(1), C = grad_out.size(1);
-  TORCH_CHECK(grad_table.is_contiguous() && grad_table.size(1) == C, "gradient buffer must be contiguous (R, ", C, ")");
+  TORCH_CHECK(grad_table.is_contiguous() && grad_table.size(1) == C,
+              "gradient buffer must be contiguous (R, ", C, ")");
   AT_DISPATCH_FLOATING_TYPES(grad_out.scalar_type(), "weighted_gather_backward", [&] {
     const scalar_t* g = grad_out.data_ptr<scalar_t>();
     const int64_t* idx = index.data_ptr<int64_t>();
     const scalar_t* w = weight.data_ptr<scalar_t>();
     scalar_t* gt = grad_table.data_ptr<scalar_t>();
     // Threads split the channels, so no two threads write the same address.
-    const int64_t block = std::max<int64_t>(16, (C + at::get_num_threads() - 1) / at::get_num_threads());
+    const int64_t block =
+        std::max<int64_t>(16, (C + at::get_num_threads() - 1) / at::get_num_threads());
     const int64_t blocks = (C + block - 1) / block;
     at::parallel_for(0, blocks, 1, [&](int64_t b0, int64_t b1) {
       for (int64_t b = b0; b < b1; ++b) {
@@ -185,7 +187,8 @@ int axis_taps_scalar(T x, int64_t s, int64_t S, int64_t* idx, T* w) {
     w[1] = f;
     return 2;
   }
-  const T scale = static_cast<T>(S > 1 ? static_cast<double>(s - 1) / static_cast<double>(S - 1) : 0.0);
+  const T scale =
+      static_cast<T>(S > 1 ? static_cast<double>(s - 1) / static_cast<double>(S - 1) : 0.0);
   const T X0 = i0 * scale, X1 = (i0 + 1) * scale;
   const T j0 = std::min(std::floor(X0), static_cast<T>(s - 1));
   const T j1 = std::min(std::floor(X1), static_cast<T>(s - 1));
@@ -212,14 +215,17 @@ Taps multi_level_taps(const torch::Tensor& uv, const torch::Tensor& view,
   if (!uv.device().is_cpu()) {
     std::vector<Taps> taps;
     for (size_t l = 0; l < sizes.size(); ++l)
-      taps.push_back(upsampled_bilinear_taps(uv, view, sizes[l].first, sizes[l].second, H, W, row_offsets[l]));
+      taps.push_back(
+          upsampled_bilinear_taps(uv, view, sizes[l].first, sizes[l].second, H, W, row_offsets[l]));
     return concat_taps(taps);
   }
   TORCH_CHECK(uv.dim() == 2 && uv.size(1) == 2, "uv must be (M, 2), got ", uv.sizes());
-  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ", view.sizes());
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ",
+              view.sizes());
   int64_t T_ = 0;
   for (const auto& [h, w] : sizes) {
-    TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ", W, ")");
+    TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ",
+                W, ")");
     T_ += (h == H && w == W) ? 4 : 9;
   }
   const int64_t M = uv.size(0);
@@ -257,8 +263,10 @@ Taps multi_level_taps(const torch::Tensor& uv, const torch::Tensor& view,
 Taps upsampled_bilinear_taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t h,
                              int64_t w, int64_t H, int64_t W, int64_t row_offset) {
   TORCH_CHECK(uv.dim() == 2 && uv.size(1) == 2, "uv must be (M, 2), got ", uv.sizes());
-  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ", view.sizes());
-  TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ", W, ")");
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ",
+              view.sizes());
+  TORCH_CHECK(h <= H && w <= W, "feature map (", h, ", ", w, ") larger than the image (", H, ", ",
+              W, ")");
   auto [ix, wx] = axis_taps(uv.select(1, 0), w, W);
   auto [iy, wy] = axis_taps(uv.select(1, 1), h, H);
   const auto base = view.to(torch::kLong) * (h * w) + row_offset;
@@ -277,7 +285,8 @@ Taps concat_taps(const std::vector<Taps>& taps) {
   return {torch::cat(index, 1), torch::cat(weight, 1)};
 }
 
-torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps, const torch::Tensor& grad_sink) {
+torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
+                              const torch::Tensor& grad_sink) {
   TORCH_CHECK(table.dim() == 2, "table must be (R, C), got ", table.sizes());
   TORCH_CHECK(taps.index.sizes() == taps.weight.sizes(), "taps index ", taps.index.sizes(),
               " and weight ", taps.weight.sizes(), " differ");
@@ -291,8 +300,9 @@ torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps, cons
   if (grad_sink.defined())
     TORCH_CHECK(grad_sink.sizes() == table.sizes() && grad_sink.is_contiguous(),
                 "gradient sink must be a contiguous tensor shaped like the table ", table.sizes());
-  return WeightedGather::apply(table.contiguous(), taps.index.contiguous(), weight,
-                               grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt);
+  return WeightedGather::apply(
+      table.contiguous(), taps.index.contiguous(), weight,
+      grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt);
 }
 
 torch::Tensor to_table(const torch::Tensor& map) {

@@ -15,13 +15,16 @@ torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& 
   return table.permute({1, 0, 2}).reshape({table.size(1), -1});
 }
 
-FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads) { return {fdi.fold(), heads.fold()}; }
+FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads) {
+  return {fdi.fold(), heads.fold()};
+}
 
 namespace {
 
 // The window form of a readout: its values at every window pixel, read from its level table.
-WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight, const torch::Tensor& bias,
-                        const PixelWindows& windows, const torch::Tensor& uv, const torch::Tensor& view,
+WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight,
+                        const torch::Tensor& bias, const PixelWindows& windows,
+                        const torch::Tensor& uv, const torch::Tensor& view,
                         const PixelGeometry& g) {
   constexpr int64_t kChunk = 65536;  // window pixels per step: bounds the taps' memory
   WindowReadout w{torch::empty({windows.rows(), r.table.size(1)}, r.table.options()), weight, bias};
@@ -34,8 +37,8 @@ WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight, cons
 
 }  // namespace
 
-PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                                  const HeadsFolded& heads) {
+PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
+                                  const FDIImpl& fdi, const HeadsFolded& heads) {
   PixelReadouts px;
   px.geometry = enc.geometry;
   px.alpha = encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias);
@@ -44,15 +47,17 @@ PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews
   return px;
 }
 
-WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                                    const HeadsFolded& heads, const PixelWindows& windows) {
+WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
+                                    const FDIImpl& fdi, const HeadsFolded& heads,
+                                    const PixelWindows& windows) {
   WindowReadouts px;
   const auto [uv, view] = windows.pixels(enc.images.options());
   // One readout at a time, so that a single level table exists at any moment.
-  px.alpha = to_window(encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias),
-                       fdi.alpha_res_0->weight, fdi.alpha_res_0->bias, windows, uv, view, enc.geometry);
-  px.color = to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias), heads.readout_weight,
-                       heads.readout_bias, windows, uv, view, enc.geometry);
+  px.alpha =
+      to_window(encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias),
+                fdi.alpha_res_0->weight, fdi.alpha_res_0->bias, windows, uv, view, enc.geometry);
+  px.color = to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias),
+                       heads.readout_weight, heads.readout_bias, windows, uv, view, enc.geometry);
   px.windows = windows;
   px.levels.enc = enc;  // for points outside the windows
   return px;
@@ -60,14 +65,16 @@ WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedVie
 
 PixelWindows body_windows(const FrameGeometry& geo, const torch::Tensor& vertices, double distance,
                           const PixelGeometry& g) {
-  TORCH_CHECK(vertices.dim() == 2 && vertices.size(1) == 3, "body_windows: vertices must be (Nv, 3), got ",
-              vertices.sizes());
+  TORCH_CHECK(vertices.dim() == 2 && vertices.size(1) == 3,
+              "body_windows: vertices must be (Nv, 3), got ", vertices.sizes());
   const auto opts = geo.K.options();
   auto signs = torch::tensor({-1.0, 1.0}, opts);
   const auto grid = torch::meshgrid({signs, signs, signs}, "ij");
   signs = torch::stack({grid[0].flatten(), grid[1].flatten(), grid[2].flatten()}, 1);  // (8, 3)
   const auto corners = (vertices.to(opts).unsqueeze(1) + distance * signs).reshape({-1, 3});
-  const auto depth = (torch::matmul(corners.unsqueeze(0), geo.R.transpose(1, 2)) + geo.T.reshape({-1, 1, 3})).select(2, 2);
+  const auto depth =
+      (torch::matmul(corners.unsqueeze(0), geo.R.transpose(1, 2)) + geo.T.reshape({-1, 1, 3}))
+          .select(2, 2);
   const auto uv = geometry::project_views(corners, geo.K, geo.R, geo.T);  // (V, 8 Nv, 2)
   PixelWindows w;
   int64_t offset = 0;
@@ -76,7 +83,9 @@ PixelWindows body_windows(const FrameGeometry& geo, const torch::Tensor& vertice
     const bool in_front = depth[v].min().item<double>() > 0 && uv[v].isfinite().all().item<bool>();
     if (in_front && corners.size(0) > 0) {
       const auto lo = std::get<0>(uv[v].min(0)), hi = std::get<0>(uv[v].max(0));
-      auto clampi = [](double x, int64_t n) { return std::min<int64_t>(std::max<double>(x, 0), n); };
+      auto clampi = [](double x, int64_t n) {
+        return std::min<int64_t>(std::max<double>(x, 0), n);
+      };
       x0 = clampi(std::floor(lo[0].item<double>()) - 1, g.width);
       y0 = clampi(std::floor(lo[1].item<double>()) - 1, g.height);
       x1 = std::max(x0, clampi(std::ceil(hi[0].item<double>()) + 2, g.width));

@@ -37,11 +37,12 @@ FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads);
 // sampling, so FDI's alpha_res_0 and the colour head's folded readout are applied to each
 // ResNet level (and the raw-RGB channels to the image) once per frame: PixelReadouts::alpha and
 // ::color, read per point by PixelReadout::sample. p_v is never formed at full resolution.
-PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                                  const HeadsFolded& heads);
+PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
+                                  const FDIImpl& fdi, const HeadsFolded& heads);
 // The same in window form (4. below): each readout at every pixel of `windows`.
-WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
-                                    const HeadsFolded& heads, const PixelWindows& windows);
+WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
+                                    const FDIImpl& fdi, const HeadsFolded& heads,
+                                    const PixelWindows& windows);
 
 // 4. Readout windows (inference on CPU). Progressive rendering evaluates only points within the
 // culling distance of a body vertex, and those project into a rectangle of each view: the
@@ -51,7 +52,7 @@ WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedVie
 // of the image: the same bilinear function, float rounding aside. Points elsewhere (full
 // rendering, mesh grids) read p_v from the levels and apply the layer (PixelReadout::weight),
 // as encoder.fast_sampling does. A view whose cubes reach behind the camera gets the whole image.
-PixelWindows body_windows(const FrameGeometry& geometry, const torch::Tensor& vertices, double distance,
-                          const PixelGeometry& pixels);
+PixelWindows body_windows(const FrameGeometry& geometry, const torch::Tensor& vertices,
+                          double distance, const PixelGeometry& pixels);
 
 }  // namespace th::model

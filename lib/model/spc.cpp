@@ -8,7 +8,8 @@ SPCTrilinearImpl::SPCTrilinearImpl(const ModelConfig& config) : config_(config.s
   const int64_t C = config_.channels;
   embed = register_module("embed", torch::nn::Linear(config.transhe.dim, C));
   auto conv3 = [&] { return torch::nn::Conv3d(torch::nn::Conv3dOptions(C, C, 3).padding(1)); };
-  conv = register_module("conv", torch::nn::Sequential(conv3(), torch::nn::ReLU(), conv3(), torch::nn::ReLU()));
+  conv = register_module(
+      "conv", torch::nn::Sequential(conv3(), torch::nn::ReLU(), conv3(), torch::nn::ReLU()));
   fc_0 = register_module("fc_0", torch::nn::Linear(C, 256));
 }
 
@@ -34,13 +35,13 @@ HumanStage SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBod
   auto sums = torch::zeros({V, nz * ny * nx, C}, feats.options()).index_add(1, flat, feats);
   const auto counts = torch::zeros({nz * ny * nx}, feats.options())
                           .index_add(0, flat, torch::ones({flat.size(0)}, feats.options()));
-  auto grid = (sums / counts.clamp_min(1).view({1, -1, 1}))
-                  .permute({0, 2, 1})
-                  .reshape({V, C, nz, ny, nx});
+  auto grid =
+      (sums / counts.clamp_min(1).view({1, -1, 1})).permute({0, 2, 1}).reshape({V, C, nz, ny, nx});
   return SPCStage{conv->forward(grid), lo, (dims - 1).to(lo.dtype()) * voxel};
 }
 
-torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Tensor& xs, const Products&) {
+torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Tensor& xs,
+                                        const Products&) {
   const auto& stage = std::get<SPCStage>(human);
   const auto& grid = stage.grid;
   const auto V = grid.size(0), n = xs.size(0);
@@ -48,7 +49,10 @@ torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Te
   const auto g = ((xs - stage.lo) / stage.extent) * 2 - 1;
   const auto coords = g.view({1, 1, 1, n, 3}).expand({V, 1, 1, n, 3});
   const auto f = F::grid_sample(grid, coords,
-                                F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kZeros).align_corners(true));
+                                F::GridSampleFuncOptions()
+                                    .mode(torch::kBilinear)
+                                    .padding_mode(torch::kZeros)
+                                    .align_corners(true));
   return torch::relu(fc_0(f.view({V, -1, n}).permute({2, 0, 1})));  // (N, V, 256)
 }
 

@@ -51,18 +51,21 @@ torch::Tensor cluster_mean(const torch::Tensor& values, const torch::Tensor& lab
     counts = torch::zeros({B, num_tokens}, values.options()).index_add(1, labels, w);
   } else {
     sums = torch::zeros({B, num_tokens, flat.size(2)}, values.options()).index_add(1, labels, flat);
-    counts = cluster_counts(labels, num_tokens).to(values.dtype()).unsqueeze(0).expand({B, num_tokens});
+    counts =
+        cluster_counts(labels, num_tokens).to(values.dtype()).unsqueeze(0).expand({B, num_tokens});
   }
   return (sums / counts.clamp_min(1).unsqueeze(-1)).view(shape);
 }
 
-torch::Tensor normalize_token_positions(const torch::Tensor& p, double scale, const torch::Tensor& like) {
+torch::Tensor normalize_token_positions(const torch::Tensor& p, double scale,
+                                        const torch::Tensor& like) {
   const auto d = p.to(torch::kDouble);
   return ((((d + scale) / (2 * scale)) - 0.5) * 2).to(like.scalar_type());
 }
 
 AttentionImpl::AttentionImpl(int64_t dim, int64_t heads_) : heads(heads_) {
-  qkv = register_module("qkv", torch::nn::Linear(torch::nn::LinearOptions(dim, 3 * dim).bias(true)));
+  qkv =
+      register_module("qkv", torch::nn::Linear(torch::nn::LinearOptions(dim, 3 * dim).bias(true)));
   proj = register_module("proj", torch::nn::Linear(dim, dim));
   init_linear(qkv);
   init_linear(proj);
@@ -100,12 +103,14 @@ torch::Tensor BlockImpl::forward(const torch::Tensor& x) {
 
 TransHEImpl::TransHEImpl(const TransHEConfig& config_) : config(config_) {
   blocks = register_module("blocks", torch::nn::ModuleList());
-  for (int i = 0; i < config.depth; ++i) blocks->push_back(Block(config.dim, config.heads, config.mlp_dim));
+  for (int i = 0; i < config.depth; ++i)
+    blocks->push_back(Block(config.dim, config.heads, config.mlp_dim));
   norm = register_module("norm", layer_norm(config.dim));
 }
 
 torch::Tensor TransHEImpl::encode_positions(const torch::Tensor& positions) const {
-  return sincos_encoding(positions, config.pe_freqs, false, config.pe_rounding == PeRounding::fused);
+  return sincos_encoding(positions, config.pe_freqs, false,
+                         config.pe_rounding == PeRounding::fused);
 }
 
 torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Tensor& positions) {
@@ -120,11 +125,16 @@ torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Ten
 
 TokenRecipe token_recipe(const ModelConfig& config) {
   TokenRecipe r{[](const FrameInputs&) { return torch::Tensor(); },
-                [](const FrameInputs& in, const PaintedBody&) -> const torch::Tensor& { return in.canonical; },
+                [](const FrameInputs& in, const PaintedBody&) -> const torch::Tensor& {
+                  return in.canonical;
+                },
                 config.transhe.pe_scale};
-  if (config.grouping.mean_over == MeanOver::visible) r.weights = [](const FrameInputs& in) { return in.visibility; };
+  if (config.grouping.mean_over == MeanOver::visible)
+    r.weights = [](const FrameInputs& in) { return in.visibility; };
   if (config.transhe.position == TokenPosition::observation)
-    r.position_source = [](const FrameInputs&, const PaintedBody& body) -> const torch::Tensor& { return body.xs_vertices; };
+    r.position_source = [](const FrameInputs&, const PaintedBody& body) -> const torch::Tensor& {
+      return body.xs_vertices;
+    };
   return r;
 }
 
@@ -142,7 +152,8 @@ FrameTokens build_tokens(TransHEImpl* vit, const TokenRecipe& recipe, const Fram
   // METHOD 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
   // for the observation-space ablation, from the posed body in the SMPL frame.
   const auto& source = recipe.position_source(in, body);
-  const auto means = cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);
+  const auto means =
+      cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);
   t.positions = normalize_token_positions(means, recipe.pe_scale, painted);
   t.features = vit ? vit->forward(feats, t.positions) : feats;
   const auto& xs = body.xs_vertices;

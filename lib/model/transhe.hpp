@@ -24,7 +24,8 @@ torch::Tensor cluster_counts(const torch::Tensor& labels, int64_t num_tokens);
 // Token position normalisation of the reference: ((p + 1.5) / 3 - 0.5) * 2, evaluated in
 // float64 and rounded to float32 once [parity: the high PE frequencies see every ulp].
 // p: (Nt, 3) float64 cluster means -> (Nt, 3) in the dtype of `like`.
-torch::Tensor normalize_token_positions(const torch::Tensor& p, double scale, const torch::Tensor& like);
+torch::Tensor normalize_token_positions(const torch::Tensor& p, double scale,
+                                        const torch::Tensor& like);
 
 class AttentionImpl : public torch::nn::Module {
  public:

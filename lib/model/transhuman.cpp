@@ -7,10 +7,10 @@
 #include <limits>
 
 #include "core/error.hpp"
-#include "model/pretrained.hpp"
-#include "model/positional_encoding.hpp"
-#include "model/shortcuts.hpp"
 #include "geometry/camera.hpp"
+#include "model/positional_encoding.hpp"
+#include "model/pretrained.hpp"
+#include "model/shortcuts.hpp"
 #include "render/body_distance.hpp"
 #include "render/chunks.hpp"
 
@@ -19,7 +19,8 @@ namespace th::model {
 using render::ScopedTimer;
 
 TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
-  encoder = register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb, config.transhe.dim));
+  encoder =
+      register_module("encoder", Encoder(config.encoder, config.fdi.raw_rgb, config.transhe.dim));
   if (!config.encoder.pretrained.empty()) {
     load_pretrained_encoder(*encoder, config.encoder.pretrained);
     spdlog::info("encoder: ImageNet ResNet-18 weights from {}", config.encoder.pretrained);
@@ -44,7 +45,8 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
   geo.T = in.T.to(opts).reshape({-1, 3, 1});
   geo.Rh = in.Rh.to(opts);
   geo.Th = in.Th.to(opts).reshape({3});
-  if (cull_distance > 0) geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
+  if (cull_distance > 0)
+    geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
 
   // Encoder (METHOD 3.1).
   EncodedViews enc;
@@ -73,11 +75,13 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
       FrameAutocast autocast(products_, opts.device());
       cache.human = human->prepare(in, body);
     }
-    std::visit([](auto& stage) {
-      stage.visit([](torch::Tensor& t, torch::Tensor*) {
-        if (t.defined()) t = Products::fp32(t);
-      });
-    }, cache.human);
+    std::visit(
+        [](auto& stage) {
+          stage.visit([](torch::Tensor& t, torch::Tensor*) {
+            if (t.defined()) t = Products::fp32(t);
+          });
+        },
+        cache.human);
   }
 
   // What per-point sampling reads of the encoder output (the appearance branch of FDI and the
@@ -105,7 +109,8 @@ TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch
   return {network_->trunk(cache.network, s, a, products_), uv};
 }
 
-torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs) {
+torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t,
+                                    const torch::Tensor& dirs) {
   torch::Tensor pix;  // p_v, or its folded readout (exact shortcuts)
   {
     ScopedTimer timer(profile_, "sampling");
@@ -134,7 +139,8 @@ torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tens
   return heads->density(t.e, products_);
 }
 
-torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
+torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache,
+                                                    const torch::Tensor& pts,
                                                     const torch::Tensor& dirs) {
   const auto t = trunk(cache, pts);
   torch::Tensor sigma;
@@ -150,8 +156,10 @@ torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache, con
   raw.select(1, 3).copy_(sigma);
   if (idx.size(0) == 0) return raw;
   const Trunk sub{t.e.index_select(0, idx), t.uv.index_select(0, idx)};
-  raw.index_copy_(0, idx, torch::cat({color(cache, sub, dirs.index_select(0, idx)),
-                                      sigma.index_select(0, idx).unsqueeze(1)}, 1));
+  raw.index_copy_(0, idx,
+                  torch::cat({color(cache, sub, dirs.index_select(0, idx)),
+                              sigma.index_select(0, idx).unsqueeze(1)},
+                             1));
   return raw;
 }
 
@@ -197,8 +205,9 @@ struct ChunkJob : torch::CustomClassHolder {
   std::vector<torch::Tensor> outputs;
 };
 
-torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache, const torch::Tensor& pts,
-                             const torch::Tensor& dirs, int64_t chunk, bool density_first) {
+torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache,
+                             const torch::Tensor& pts, const torch::Tensor& dirs, int64_t chunk,
+                             bool density_first) {
   return render::cat_chunks(pts.size(0), chunk, [&](int64_t b, int64_t e) {
     const auto p = pts.slice(0, b, e), d = dirs.slice(0, b, e);
     return density_first ? model.forward_density_first(cache, p, d) : model.forward(cache, p, d);
@@ -218,11 +227,13 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
                                c10::intrusive_ptr<ChunkJob> job) {
     ctx->save_for_backward({pts, dirs});
     ctx->saved_data["job"] = c10::IValue::make_capsule(job);
-    if (!job->keep_graph) return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
+    if (!job->keep_graph)
+      return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
     torch::AutoGradMode enable(true);
     job->kept = std::make_unique<LeafFrame>(job->cache);
     return render::cat_chunks(pts.size(0), job->chunk, [&](int64_t b, int64_t e) {
-      job->outputs.push_back(job->model->forward_density_first(job->kept->cache, pts.slice(0, b, e), dirs.slice(0, b, e)));
+      job->outputs.push_back(job->model->forward_density_first(job->kept->cache, pts.slice(0, b, e),
+                                                               dirs.slice(0, b, e)));
       return job->outputs.back().detach();
     });
   }
@@ -237,7 +248,8 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     const int64_t n = pts.size(0);
     torch::autograd::variable_list grads;
     if (job->keep_graph) {
-      TORCH_CHECK(job->kept && job->outputs.size() == size_t(std::max<int64_t>(1, (n + job->chunk - 1) / job->chunk)),
+      TORCH_CHECK(job->kept && job->outputs.size() ==
+                                   size_t(std::max<int64_t>(1, (n + job->chunk - 1) / job->chunk)),
                   "the kept per-point graphs were already used (a second backward pass)");
       size_t i = 0;
       render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
@@ -249,7 +261,8 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
     } else {
       LeafFrame leaf(job->cache);
       render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
-        const auto raw = job->model->forward_density_first(leaf.cache, pts.slice(0, b, e), dirs.slice(0, b, e));
+        const auto raw =
+            job->model->forward_density_first(leaf.cache, pts.slice(0, b, e), dirs.slice(0, b, e));
         torch::autograd::backward({raw}, {g.slice(0, b, e)});
       });
       grads = leaf.grads();
@@ -263,13 +276,17 @@ struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
 
 }  // namespace
 
-FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint,
-                       int64_t keep_graph_points)
-    : model_(model), cache_(cache), chunk_(chunk_points), checkpoint_(checkpoint),
+FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points,
+                       bool checkpoint, int64_t keep_graph_points)
+    : model_(model),
+      cache_(cache),
+      chunk_(chunk_points),
+      checkpoint_(checkpoint),
       keep_graph_points_(keep_graph_points) {}
 
 torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dirs) {
-  if (!checkpoint_ || !torch::GradMode::is_enabled()) return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
+  if (!checkpoint_ || !torch::GradMode::is_enabled())
+    return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
   auto job = c10::make_intrusive<ChunkJob>();
   job->model = &model_;
   job->cache = cache_;
@@ -301,11 +318,16 @@ std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model) {
     const auto& k = p.key();
     auto starts = [&](const char* prefix) { return k.rfind(prefix, 0) == 0; };
     int64_t* slot;
-    if (starts("encoder.model.")) slot = &find("encoder (ResNet-18 to layer2)");
-    else if (starts("encoder.")) slot = &find("reduction + colour");
-    else if (starts("human.ViT.")) slot = &find("ViT");
-    else if (starts("human.embed.") || starts("human.conv.")) slot = &find("SPC network");
-    else slot = &find("heads (fc_0, FDI, density, colour)");
+    if (starts("encoder.model."))
+      slot = &find("encoder (ResNet-18 to layer2)");
+    else if (starts("encoder."))
+      slot = &find("reduction + colour");
+    else if (starts("human.ViT."))
+      slot = &find("ViT");
+    else if (starts("human.embed.") || starts("human.conv."))
+      slot = &find("SPC network");
+    else
+      slot = &find("heads (fc_0, FDI, density, colour)");
     *slot += p.value().numel();
   }
   int64_t total = 0;

@@ -37,7 +37,8 @@ class TransHumanImpl : public torch::nn::Module {
 
   // pts: (N, 3) world, dirs: (N, 3) ray directions (any length) -> raw (N, 4): rgb logits,
   // sigma_raw. One chunk: the caller bounds N (see FrameField).
-  torch::Tensor forward(const FrameCache& cache, const torch::Tensor& pts, const torch::Tensor& dirs);
+  torch::Tensor forward(const FrameCache& cache, const torch::Tensor& pts,
+                        const torch::Tensor& dirs);
   // As forward, but the colour branch runs only where sigma_raw > 0 (zeros elsewhere).
   torch::Tensor forward_density_first(const FrameCache& cache, const torch::Tensor& pts,
                                       const torch::Tensor& dirs);
@@ -95,8 +96,8 @@ TORCH_MODULE(TransHuman);
 // runs the same chunks in the same order, so the gradients are the same bit for bit.
 class FrameField : public render::RadianceField {
  public:
-  FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points, bool checkpoint = true,
-             int64_t keep_graph_points = 0);
+  FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points,
+             bool checkpoint = true, int64_t keep_graph_points = 0);
   torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) override;
   torch::Tensor raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) override;
 

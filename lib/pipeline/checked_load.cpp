@@ -20,11 +20,11 @@ namespace fs = std::filesystem;
 
 torch::ScalarType storage_type(const std::string& cls, const std::string& source) {
   static const std::map<std::string, torch::ScalarType> types = {
-      {"torch.FloatStorage", torch::kFloat},   {"torch.DoubleStorage", torch::kDouble},
-      {"torch.HalfStorage", torch::kHalf},     {"torch.BFloat16Storage", torch::kBFloat16},
-      {"torch.LongStorage", torch::kLong},     {"torch.IntStorage", torch::kInt},
-      {"torch.ShortStorage", torch::kShort},   {"torch.CharStorage", torch::kChar},
-      {"torch.ByteStorage", torch::kByte},     {"torch.BoolStorage", torch::kBool},
+      {"torch.FloatStorage", torch::kFloat},  {"torch.DoubleStorage", torch::kDouble},
+      {"torch.HalfStorage", torch::kHalf},    {"torch.BFloat16Storage", torch::kBFloat16},
+      {"torch.LongStorage", torch::kLong},    {"torch.IntStorage", torch::kInt},
+      {"torch.ShortStorage", torch::kShort},  {"torch.CharStorage", torch::kChar},
+      {"torch.ByteStorage", torch::kByte},    {"torch.BoolStorage", torch::kBool},
       {"torch.UntypedStorage", torch::kByte},  // a bare storage (2.x); numel counts bytes
   };
   const auto it = types.find(cls);
@@ -44,7 +44,8 @@ void check_storage_records(const io::ZipSource& source, const std::vector<io::Zi
   const std::string prefix = pickle.substr(0, pickle.size() - std::string("data.pkl").size());
   for (const auto& e : entries) {
     if (e.name == pickle) pkl = &e;
-    if (e.name.compare(0, prefix.size() + 5, prefix + "data/") == 0) records[e.name.substr(prefix.size() + 5)] = &e;
+    if (e.name.compare(0, prefix.size() + 5, prefix + "data/") == 0)
+      records[e.name.substr(prefix.size() + 5)] = &e;
   }
   if (pkl == nullptr) return;
   const std::string where = name + "/" + pickle;
@@ -53,33 +54,37 @@ void check_storage_records(const io::ZipSource& source, const std::vector<io::Zi
   ext.ignore_dict_state = true;
   ext.persistent_load = [&](const io::Value& pid) -> io::Value {
     const auto& t = pid.as_list();
-    if (t.size() < 5 || t[0].as_str() != "storage") fail(where, ": unexpected persistent id ", pid.type_name());
+    if (t.size() < 5 || t[0].as_str() != "storage")
+      fail(where, ": unexpected persistent id ", pid.type_name());
     const auto dtype = storage_type(t[1].as_object().cls, where);
     const std::string key = t[2].as_str();
     const int64_t numel = t[4].as_int();
     const auto it = records.find(key);
-    if (it == records.end()) fail(where, ": names storage record 'data/", key, "', which the archive lacks");
+    if (it == records.end())
+      fail(where, ": names storage record 'data/", key, "', which the archive lacks");
     const auto item = static_cast<int64_t>(c10::elementSize(dtype));
     if (numel < 0 || it->second->size % static_cast<uint64_t>(item) != 0 ||
         it->second->size / static_cast<uint64_t>(item) != static_cast<uint64_t>(numel))
-      fail(name, "/", it->second->name, ": a storage record of ", it->second->size, " bytes where ", numel,
-           " elements of ", item, " bytes are claimed (a truncated or corrupt record)");
+      fail(name, "/", it->second->name, ": a storage record of ", it->second->size, " bytes where ",
+           numel, " elements of ", item, " bytes are claimed (a truncated or corrupt record)");
     return io::Value();
   };
   auto none = [](const io::Value::List&) { return io::Value(); };
-  for (const char* f : {"torch._utils._rebuild_tensor", "torch._utils._rebuild_tensor_v2",
-                        "torch._utils._rebuild_parameter", "torch._utils._rebuild_parameter_with_state",
-                        "torch.torch_version.TorchVersion", "collections.Counter"})
+  for (const char* f :
+       {"torch._utils._rebuild_tensor", "torch._utils._rebuild_tensor_v2",
+        "torch._utils._rebuild_parameter", "torch._utils._rebuild_parameter_with_state",
+        "torch.torch_version.TorchVersion", "collections.Counter"})
     ext.globals[f] = none;
   // TorchScript's typed containers: the container itself.
   auto first = [](const io::Value::List& a) { return a.empty() ? io::Value() : a[0]; };
-  for (const char* f : {"torch.jit._pickle.restore_type_tag", "torch.jit._pickle.build_intlist",
-                        "torch.jit._pickle.build_doublelist", "torch.jit._pickle.build_boollist",
-                        "torch.jit._pickle.build_tensorlist", "torch.jit._pickle.build_tensor_from_id"})
+  for (const char* f :
+       {"torch.jit._pickle.restore_type_tag", "torch.jit._pickle.build_intlist",
+        "torch.jit._pickle.build_doublelist", "torch.jit._pickle.build_boollist",
+        "torch.jit._pickle.build_tensorlist", "torch.jit._pickle.build_tensor_from_id"})
     ext.globals[f] = first;
-  for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
-                        "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
-                        "UntypedStorage"})
+  for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage",
+                        "LongStorage", "IntStorage", "ShortStorage", "CharStorage", "ByteStorage",
+                        "BoolStorage", "UntypedStorage"})
     ext.globals[std::string("torch.") + s] = nullptr;
   io::parse_pickle(io::read_member(source, *pkl, name), where, ext);
 }
@@ -102,15 +107,16 @@ void check_checkpoint_archive(const fs::path& path) {
            "); torch.save and LibTorch store them uncompressed, so this file was repacked "
            "(save it again with torch.save)");
     if (entry.size > kMaxInflated || entry.size > entry.compressed_size * 1032 + 1024)
-      fail(where, ": a compressed member claiming ", entry.size, " bytes from ", entry.compressed_size,
-           " (a checkpoint's compressed members are small code files)");
+      fail(where, ": a compressed member claiming ", entry.size, " bytes from ",
+           entry.compressed_size, " (a checkpoint's compressed members are small code files)");
   }
   // <archive>/data.pkl and <archive>/version, as torch.save and LibTorch write them (LibTorch's
   // reader is not opened on anything else: it leaks when its constructor throws).
   bool pickle = false, version = false;
   for (const auto& entry : entries) {
     const auto slash = entry.name.find('/');
-    if (slash == std::string::npos || entry.name.find('/', slash + 1) != std::string::npos) continue;
+    if (slash == std::string::npos || entry.name.find('/', slash + 1) != std::string::npos)
+      continue;
     const std::string leaf = entry.name.substr(slash + 1);
     version = version || leaf == "version";
     if (leaf != "data.pkl") continue;
@@ -118,7 +124,8 @@ void check_checkpoint_archive(const fs::path& path) {
     check_storage_records(source, entries, path.string(), entry.name);
   }
   if (!pickle || !version)
-    fail(path.string(), ": not a PyTorch checkpoint (no <archive>/", pickle ? "version" : "data.pkl", " record)");
+    fail(path.string(), ": not a PyTorch checkpoint (no <archive>/",
+         pickle ? "version" : "data.pkl", " record)");
 }
 
 namespace {
@@ -136,14 +143,15 @@ std::string index_text(int64_t flat, c10::IntArrayRef sizes) {
 
 }  // namespace
 
-void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset, int64_t storage_elements,
-                const std::string& what) {
+void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset,
+                int64_t storage_elements, const std::string& what) {
   auto bad_view = [&](const std::string& why) {
     fail(what, " (shape ", sizes, ", strides ", strides, ", offset ", offset, ") ", why,
          ": a truncated or corrupt record");
   };
   if (sizes.size() != strides.size())
-    bad_view("has " + std::to_string(strides.size()) + " stride(s) for " + std::to_string(sizes.size()) + " size(s)");
+    bad_view("has " + std::to_string(strides.size()) + " stride(s) for " +
+             std::to_string(sizes.size()) + " size(s)");
   if (offset < 0) bad_view("starts before its storage");
   constexpr int64_t kMax = std::numeric_limits<int64_t>::max();
   int64_t numel = 1, last = offset;
@@ -152,15 +160,16 @@ void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset
     if (sizes[d] == 0) return;  // no element is read
     if (numel > kMax / sizes[d]) bad_view("has more elements than can be counted");
     numel *= sizes[d];
-    if (strides[d] > 0 && (sizes[d] - 1) > (kMax - last) / strides[d]) bad_view("reaches past any storage");
+    if (strides[d] > 0 && (sizes[d] - 1) > (kMax - last) / strides[d])
+      bad_view("reaches past any storage");
     last += (sizes[d] - 1) * strides[d];
   }
   if (last >= storage_elements)
     bad_view("needs " + std::to_string(last + 1) + " elements of its storage, which holds " +
              std::to_string(storage_elements));
   if (numel > storage_elements)
-    bad_view("views " + std::to_string(numel) + " elements of a storage of " + std::to_string(storage_elements) +
-             " (an overlapping, expanded view is not a weight)");
+    bad_view("views " + std::to_string(numel) + " elements of a storage of " +
+             std::to_string(storage_elements) + " (an overlapping, expanded view is not a weight)");
 }
 
 void check_finite(const torch::Tensor& t, const std::string& what) {
@@ -169,15 +178,18 @@ void check_finite(const torch::Tensor& t, const std::string& what) {
   if (!bad.any().item<bool>()) return;
   const int64_t first = bad.nonzero()[0].item<int64_t>();
   const double value = torch::real(t.flatten()[first]).to(torch::kDouble).item<double>();
-  fail(what, " holds ", std::isnan(value) ? "NaN" : "an infinite value", " at index ", index_text(first, t.sizes()),
-       " (", bad.sum().item<int64_t>(), " of ", t.numel(), " values are not finite)");
+  fail(what, " holds ", std::isnan(value) ? "NaN" : "an infinite value", " at index ",
+       index_text(first, t.sizes()), " (", bad.sum().item<int64_t>(), " of ", t.numel(),
+       " values are not finite)");
 }
 
-void check_loaded_tensor(const torch::Tensor& t, const std::string& source, const std::string& name) {
+void check_loaded_tensor(const torch::Tensor& t, const std::string& source,
+                         const std::string& name) {
   const std::string what = source + ": tensor '" + name + "'";
   if (!t.defined()) fail(what, " is undefined");
   const auto item = static_cast<int64_t>(t.element_size());
-  check_view(t.sizes(), t.strides(), t.storage_offset(), static_cast<int64_t>(t.storage().nbytes()) / item, what);
+  check_view(t.sizes(), t.strides(), t.storage_offset(),
+             static_cast<int64_t>(t.storage().nbytes()) / item, what);
   check_finite(t, what);
 }
 
@@ -187,7 +199,8 @@ ParameterKeys config_keys_for(const std::string& name) {
       {"human.ViT.blocks.", {"model.transhe.depth", "model.transhe.dim / model.transhe.mlp_dim"}},
       {"human.ViT.", {"model.transhe.enabled", "model.transhe.dim"}},
       {"human.fc_0.",
-       {"model.representation", "model.transhe.dim / model.dparf.coordinate / model.dparf.pe_freqs"}},
+       {"model.representation",
+        "model.transhe.dim / model.dparf.coordinate / model.dparf.pe_freqs"}},
       {"human.embed.", {"model.representation", "model.spc.channels / model.transhe.dim"}},
       {"human.conv.", {"model.representation", "model.spc.channels"}},
       {"human.", {"model.fdi.human", "model.representation"}},
@@ -213,8 +226,8 @@ std::string decided_by(const std::string& key) {
 
 using Copies = std::vector<std::pair<torch::Tensor, torch::Tensor>>;
 
-void collect(torch::nn::Module& module, torch::serialize::InputArchive& archive, const std::string& source,
-             const std::string& prefix, Copies& copies) {
+void collect(torch::nn::Module& module, torch::serialize::InputArchive& archive,
+             const std::string& source, const std::string& prefix, Copies& copies) {
   std::set<std::string> known;
   auto visit = [&](const std::string& key, const torch::Tensor& dst, bool buffer) {
     known.insert(key);
@@ -227,11 +240,12 @@ void collect(torch::nn::Module& module, torch::serialize::InputArchive& archive,
       fail(source, ": tensor '", name, "' cannot be read: ", e.what_without_backtrace());
     }
     if (!found)
-      fail(source, ": has no tensor '", name, "', which this model has", decided_by(config_keys_for(name).presence));
+      fail(source, ": has no tensor '", name, "', which this model has",
+           decided_by(config_keys_for(name).presence));
     check_loaded_tensor(read, source, name);
     if (read.sizes() != dst.sizes())
-      fail(source, ": tensor '", name, "' has shape ", read.sizes(), ", this model's is ", dst.sizes(),
-           decided_by(config_keys_for(name).shape));
+      fail(source, ": tensor '", name, "' has shape ", read.sizes(), ", this model's is ",
+           dst.sizes(), decided_by(config_keys_for(name).shape));
     copies.emplace_back(dst, read);
   };
   for (auto& p : module.named_parameters(/*recurse=*/false)) visit(p.key(), p.value(), false);
@@ -256,9 +270,12 @@ void collect(torch::nn::Module& module, torch::serialize::InputArchive& archive,
   for (const auto& key : archive.keys()) {
     if (known.count(key)) continue;
     c10::IValue value;
-    if (!archive.try_read(key, value) || !(value.isTensor() || value.isModule() || value.isObject())) continue;
+    if (!archive.try_read(key, value) ||
+        !(value.isTensor() || value.isModule() || value.isObject()))
+      continue;
     const std::string name = prefix + key;
-    fail(source, ": holds ", value.isTensor() ? "tensor" : "module", " '", name, "', which this model does not have",
+    fail(source, ": holds ", value.isTensor() ? "tensor" : "module", " '", name,
+         "', which this model does not have",
          decided_by(config_keys_for(value.isTensor() ? name : name + ".").presence));
   }
 }
@@ -282,7 +299,8 @@ constexpr const char* kConfigKey = "model_config";
 // in the checkpoint).
 bool compared(const std::string& key) {
   return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" &&
-         key != "model.grouping.kmeans_file" && key != "model.exact_shortcuts" && key != "model.readout_windows";
+         key != "model.grouping.kmeans_file" && key != "model.exact_shortcuts" &&
+         key != "model.readout_windows";
 }
 
 }  // namespace
@@ -292,7 +310,8 @@ void write_model_config(torch::serialize::OutputArchive& archive, const ModelCon
 }
 
 std::vector<std::string> model_config_differences(torch::serialize::InputArchive& archive,
-                                                  const fs::path& checkpoint, const ModelConfig& config) {
+                                                  const fs::path& checkpoint,
+                                                  const ModelConfig& config) {
   YAML::Node trained;
   std::string origin;
   c10::IValue stored;
@@ -321,7 +340,8 @@ std::vector<std::string> model_config_differences(torch::serialize::InputArchive
     if (!compared(key)) continue;
     const auto it = before.find(key);
     if (it == before.end()) continue;  // a key added since the checkpoint was written
-    if (it->second != value) out.push_back(key + ": " + origin + " " + it->second + ", config " + value);
+    if (it->second != value)
+      out.push_back(key + ": " + origin + " " + it->second + ", config " + value);
   }
   return out;
 }

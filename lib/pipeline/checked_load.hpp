@@ -36,15 +36,16 @@ torch::ScalarType storage_type(const std::string& cls, const std::string& source
 // Throws th::Error starting with `what` when a view of `sizes`/`strides` at `offset` reaches
 // outside a storage of `storage_elements`, has negative sizes or strides, or views more elements
 // than the storage holds (a stride-0 expansion: a few bytes of file would become gigabytes).
-void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset, int64_t storage_elements,
-                const std::string& what);
+void check_view(c10::IntArrayRef sizes, c10::IntArrayRef strides, int64_t offset,
+                int64_t storage_elements, const std::string& what);
 // Throws th::Error starting with `what` naming the first NaN or infinite value's index.
 void check_finite(const torch::Tensor& tensor, const std::string& what);
 
 // Throws th::Error naming `source` and `name` when the tensor's view (offset, sizes, strides)
 // reaches outside its storage, overlaps itself (a stride-0 expansion of a record), or when a
 // floating value is NaN or infinite (the first such index is named).
-void check_loaded_tensor(const torch::Tensor& tensor, const std::string& source, const std::string& name);
+void check_loaded_tensor(const torch::Tensor& tensor, const std::string& source,
+                         const std::string& name);
 
 // The config key that decides whether the model has parameter `name` (dotted module path, ours)
 // and the one that decides its shape; "" where none is known.

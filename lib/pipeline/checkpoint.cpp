@@ -36,13 +36,15 @@ std::string archive_bytes(torch::serialize::OutputArchive& archive, const std::s
 constexpr const char* kTokenOrigin = "token_groups";
 constexpr const char* kTokenLabels = "token_labels";
 
-void write_token_groups(torch::serialize::OutputArchive& archive, const model::TransHumanImpl& model,
-                        const std::string& what) {
+void write_token_groups(torch::serialize::OutputArchive& archive,
+                        const model::TransHumanImpl& model, const std::string& what) {
   const auto& groups = model.token_groups();
   if (groups.empty())
-    fail("cannot write ", what, ": the model has no token groups yet (a run computes them at its start)");
+    fail("cannot write ", what,
+         ": the model has no token groups yet (a run computes them at its start)");
   archive.write(kTokenOrigin, c10::IValue(groups.origin));
-  archive.write(kTokenLabels, groups.labels.defined() ? groups.labels : torch::zeros({0}, torch::kInt64),
+  archive.write(kTokenLabels,
+                groups.labels.defined() ? groups.labels : torch::zeros({0}, torch::kInt64),
                 /*is_buffer=*/true);
 }
 
@@ -53,10 +55,11 @@ void read_token_groups(torch::serialize::InputArchive& archive, model::TransHuma
                        const std::string& source) {
   c10::IValue origin;
   if (!archive.try_read(kTokenOrigin, origin)) {
-    spdlog::warn("{}: written before checkpoints stored their token groups; they are computed again from "
-                 "model.grouping ({}), which gives the trained groups only where the k-means runs as it "
-                 "did in training",
-                 source, body::describe(model.config().grouping));
+    spdlog::warn(
+        "{}: written before checkpoints stored their token groups; they are computed again from "
+        "model.grouping ({}), which gives the trained groups only where the k-means runs as it "
+        "did in training",
+        source, body::describe(model.config().grouping));
     model.set_token_groups({});
     return;
   }
@@ -64,15 +67,17 @@ void read_token_groups(torch::serialize::InputArchive& archive, model::TransHuma
     fail(source, ": '", kTokenOrigin, "' is not a description of token groups");
   torch::Tensor labels;
   if (!archive.try_read(kTokenLabels, labels, /*is_buffer=*/true))
-    fail(source, ": stores token groups (", origin.toStringRef(), ") without their labels '", kTokenLabels, "'");
+    fail(source, ": stores token groups (", origin.toStringRef(), ") without their labels '",
+         kTokenLabels, "'");
   model::TokenGroups groups{{}, origin.toStringRef()};
   if (labels.numel() > 0) {
     check_loaded_tensor(labels, source, kTokenLabels);
     body::check_labels(labels, source + ": " + kTokenLabels);
     groups.labels = labels.to(torch::kCPU).clone();
   } else if (model.config().grouping.kind != GroupingKind::observation_grid) {
-    fail(source, ": its tokens are grouped per frame (", groups.origin, "), model.grouping.kind is ",
-         config::name_of(model.config().grouping.kind), ": use the run's config.yaml as --config");
+    fail(source, ": its tokens are grouped per frame (", groups.origin,
+         "), model.grouping.kind is ", config::name_of(model.config().grouping.kind),
+         ": use the run's config.yaml as --config");
   }
   model.set_token_groups(std::move(groups));
 }
@@ -162,15 +167,18 @@ void import_reference_groups(model::TransHumanImpl& model, const fs::path& check
     fail("'", checkpoint.string(), "' is a reference checkpoint, whose tokens are k-means groups: ",
          "model.grouping.kind must be canonical_kmeans, not ", config::name_of(g.kind));
   if (g.kmeans_file.empty())
-    fail("'", checkpoint.string(), "' is a reference checkpoint: it needs the token groups it was trained with. "
+    fail("'", checkpoint.string(),
+         "' is a reference checkpoint: it needs the token groups it was trained with. "
          "Set model.grouping.kmeans_file to the reference repository's kmeans_dict/kmeans_dict_",
-         g.num_tokens, ".npy, or to '", kKMeansCompute, "' to go on with groups computed here (renders will "
+         g.num_tokens, ".npy, or to '", kKMeansCompute,
+         "' to go on with groups computed here (renders will "
          "differ from the reference's)");
   if (g.kmeans_file == kKMeansCompute) {
-    spdlog::warn("{}: model.grouping.kmeans_file is '{}': the reference's network reads tokens grouped by "
-                 "this project's k-means ({}), not those it was trained with; results will differ from the "
-                 "reference's",
-                 checkpoint.string(), kKMeansCompute, body::describe(g));
+    spdlog::warn(
+        "{}: model.grouping.kmeans_file is '{}': the reference's network reads tokens grouped by "
+        "this project's k-means ({}), not those it was trained with; results will differ from the "
+        "reference's",
+        checkpoint.string(), kKMeansCompute, body::describe(g));
     model.set_token_groups({});
     return;
   }
@@ -181,7 +189,8 @@ void import_reference_groups(model::TransHumanImpl& model, const fs::path& check
 
 }  // namespace
 
-void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint, bool allow_model_mismatch) {
+void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint,
+                  bool allow_model_mismatch) {
   if (!fs::exists(checkpoint)) fail("checkpoint '", checkpoint.string(), "' does not exist");
   if (checkpoint.extension() == ".pth") {
     const auto report = import_reference_checkpoint(model, checkpoint);
@@ -207,7 +216,8 @@ void load_weights(model::TransHumanImpl& model, const fs::path& checkpoint, bool
     if (!allow_model_mismatch)
       fail("checkpoint '", checkpoint.string(), "' was trained with other model settings (", list,
            "): use the run's config.yaml as --config, or eval.model_mismatch=warn to go on anyway");
-    spdlog::warn("checkpoint {} was trained with other model settings: {}", checkpoint.string(), list);
+    spdlog::warn("checkpoint {} was trained with other model settings: {}", checkpoint.string(),
+                 list);
   }
   load_module_checked(model, m, checkpoint.string());
   read_token_groups(root, model, checkpoint.string());
@@ -238,7 +248,8 @@ void load_model_weights(model::TransHumanImpl& model, const std::filesystem::pat
     if (!archive.try_read(name, t, buffer)) fail(path.string(), ": missing tensor '", name, "'");
     check_loaded_tensor(t, path.string(), name);
     if (t.sizes() != dst.sizes())
-      fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ", dst.sizes());
+      fail(path.string(), ": tensor '", name, "' has shape ", t.sizes(), ", the model expects ",
+           dst.sizes());
     copies.emplace_back(dst, t);
   };
   for (auto& p : model.named_parameters()) read(p.key(), p.value(), false);

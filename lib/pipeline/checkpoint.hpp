@@ -21,9 +21,9 @@ namespace th::pipeline {
 
 // The position of a run, stored beside the weights.
 struct CheckpointState {
-  int epoch = 0;          // epoch to continue with
-  int64_t step = 0;       // global steps done
-  int iteration = 0;      // iterations done within `epoch`
+  int epoch = 0;      // epoch to continue with
+  int64_t step = 0;   // global steps done
+  int iteration = 0;  // iterations done within `epoch`
 };
 
 // Writes a training checkpoint to `path` atomically (in memory, then a temporary file renamed

@@ -2,10 +2,10 @@
 // Images for people to look at: validation renders, evaluation panels (prediction, ground
 // truth, inputs, error map side by side). Conversion and PNG writing: video/frame_writer.hpp.
 
-#include <opencv2/core.hpp>
 #include <torch/types.h>
 
 #include <filesystem>
+#include <opencv2/core.hpp>
 #include <string>
 #include <vector>
 

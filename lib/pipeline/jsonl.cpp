@@ -45,7 +45,8 @@ std::string JsonLine::dump_line(const nlohmann::ordered_json& value) {
   return out + "}";
 }
 
-JsonlWriter::JsonlWriter(const std::filesystem::path& file) : file_(file), out_(file, std::ios::app) {
+JsonlWriter::JsonlWriter(const std::filesystem::path& file)
+    : file_(file), out_(file, std::ios::app) {
   if (!out_) fail("cannot open '", file.string(), "' for writing");
 }
 

@@ -2,10 +2,9 @@
 // Metrics as JSON lines: one object per line, appended and flushed, so a crashed run keeps every
 // line it wrote and tools can tail the file.
 
-#include <nlohmann/json.hpp>
-
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 namespace th::pipeline {

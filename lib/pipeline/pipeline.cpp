@@ -18,8 +18,10 @@ Tokens::Tokens(model::TransHumanImpl& model, const torch::Tensor& canonical)
   const auto& stored = model.token_groups();
   if (stored.empty()) {
     auto grouping = body::make_grouping(config);
-    if (grouping->is_static()) labels_ = grouping->labels(canonical_, canonical_);
-    else grouping_ = std::move(grouping);
+    if (grouping->is_static())
+      labels_ = grouping->labels(canonical_, canonical_);
+    else
+      grouping_ = std::move(grouping);
     model.set_token_groups({labels_, body::describe(config)});
     spdlog::info("token groups: {}", body::describe(config));
     return;
@@ -71,20 +73,26 @@ model::FrameCache prepare_frame(model::TransHumanImpl& model, const model::Frame
 
 int64_t keep_graph_points(const RenderConfig& config) {
   switch (config.train_recompute) {
-    case Recompute::always: return 0;
-    case Recompute::never: return std::numeric_limits<int64_t>::max();
-    case Recompute::automatic: break;
+    case Recompute::always:
+      return 0;
+    case Recompute::never:
+      return std::numeric_limits<int64_t>::max();
+    case Recompute::automatic:
+      break;
   }
   return model::kKeepGraphPoints;
 }
 
-render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache, const render::Rays& rays,
-                            const RenderConfig& rc, const RenderPass& pass, render::Profile* profile) {
+render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache,
+                            const render::Rays& rays, const RenderConfig& rc,
+                            const RenderPass& pass, render::Profile* profile) {
   const auto* body = cache.geometry.body.get();
   if (pass.training) {
-    if (pass.skip_far_points && !body) fail("train.skip_far_points: the frame was prepared without a culling distance");
+    if (pass.skip_far_points && !body)
+      fail("train.skip_far_points: the frame was prepared without a culling distance");
     model::FrameField field(model, cache, rc.train_chunk_points, true, keep_graph_points(rc));
-    return render::VolumeRenderer(rc, profile).render(field, rays, true, pass.skip_far_points ? body : nullptr);
+    return render::VolumeRenderer(rc, profile)
+        .render(field, rays, true, pass.skip_far_points ? body : nullptr);
   }
   torch::NoGradGuard no_grad;
   model::FrameField field(model, cache, rc.chunk_points, false);
@@ -93,15 +101,17 @@ render::RenderResult render(model::TransHumanImpl& model, const model::FrameCach
   return render::render_progressive(field, *body, rays, rc, profile);
 }
 
-Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc, const model::FrameInputs& inputs,
-                       const render::Rays& rays, const RenderPass& pass, render::Profile* profile) {
+Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& rc,
+                       const model::FrameInputs& inputs, const render::Rays& rays,
+                       const RenderPass& pass, render::Profile* profile) {
   Rendered out;
   out.cache = prepare_frame(model, inputs, rc);
   out.result = render(model, out.cache, rays, rc, pass, profile);
   return out;
 }
 
-const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model, const model::FrameInputs& inputs,
+const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model,
+                                             const model::FrameInputs& inputs,
                                              const RenderConfig& rc) {
   if (valid_ && model::same_inputs(inputs_, inputs)) {
     ++reused_;
@@ -117,12 +127,14 @@ const model::FrameCache& FrameReuse::prepare(model::TransHumanImpl& model, const
 
 ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
                          const data::Sample& sample, const model::FrameInputs& inputs,
-                         metrics::LpipsImpl* lpips, const torch::Device& device, FrameReuse* frames) {
+                         metrics::LpipsImpl* lpips, const torch::Device& device,
+                         FrameReuse* frames) {
   torch::NoGradGuard no_grad;
   const auto t0 = std::chrono::steady_clock::now();
   const auto rays = sample_rays(sample, device);
-  const auto result = frames ? render(model, frames->prepare(model, inputs, rc), rays, rc, kInference)
-                             : render_sample(model, rc, inputs, rays, kInference).result;
+  const auto result = frames
+                          ? render(model, frames->prepare(model, inputs, rc), rays, rc, kInference)
+                          : render_sample(model, rc, inputs, rays, kInference).result;
   ViewResult r;
   r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   r.stats = result.stats;
@@ -140,7 +152,9 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   const auto crop = metrics::crop_to_valid(r.pred, r.gt, sample.box_mask);
   r.ssim = metrics::ssim(crop.pred.to(torch::kFloat64), crop.gt.to(torch::kFloat64));
   if (lpips) {
-    auto nchw = [&](const torch::Tensor& t) { return t.permute({2, 0, 1}).unsqueeze(0).to(device) * 2 - 1; };
+    auto nchw = [&](const torch::Tensor& t) {
+      return t.permute({2, 0, 1}).unsqueeze(0).to(device) * 2 - 1;
+    };
     r.lpips = lpips->forward(nchw(crop.pred), nchw(crop.gt)).item<double>();
   }
   return r;
@@ -150,7 +164,8 @@ void require_finite_output(const torch::Tensor& rgb, const std::string& what) {
   const int64_t bad = rgb.numel() - torch::isfinite(rgb).sum().item<int64_t>();
   if (bad == 0) return;
   fail(what, ": the network's output is not finite (", bad, " of ", rgb.numel(),
-       " values NaN or infinite): weights that are finite but overflow? nothing was scored or written for it");
+       " values NaN or infinite): weights that are finite but overflow? nothing was scored or "
+       "written for it");
 }
 
 torch::Tensor scatter_image(const torch::Tensor& rgb, const torch::Tensor& pixel, int64_t height,

@@ -61,9 +61,9 @@ model::FrameCache prepare_frame(model::TransHumanImpl& model, const model::Frame
                                 const RenderConfig& render_config);
 
 // The one render dispatcher: training, evaluation, sessions and benchmarks render through it.
-render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache, const render::Rays& rays,
-                            const RenderConfig& render_config, const RenderPass& pass,
-                            render::Profile* profile = nullptr);
+render::RenderResult render(model::TransHumanImpl& model, const model::FrameCache& cache,
+                            const render::Rays& rays, const RenderConfig& render_config,
+                            const RenderPass& pass, render::Profile* profile = nullptr);
 
 // The keep_graph_points of model::FrameField for render.train_recompute (auto, always, never).
 int64_t keep_graph_points(const RenderConfig& config);
@@ -74,8 +74,8 @@ struct Rendered {
   model::FrameCache cache;
 };
 Rendered render_sample(model::TransHumanImpl& model, const RenderConfig& render_config,
-                       const model::FrameInputs& inputs, const render::Rays& rays, const RenderPass& pass,
-                       render::Profile* profile = nullptr);
+                       const model::FrameInputs& inputs, const render::Rays& rays,
+                       const RenderPass& pass, render::Profile* profile = nullptr);
 
 // The last prepared frame, handed out again while the frame inputs stay the same value for value
 // (several target views of one frame): the per-frame stages depend only on the inputs, so the
@@ -98,12 +98,12 @@ class FrameReuse {
 // and LPIPS (when `lpips` is given; NaN otherwise) on the crop to the valid-ray rectangle.
 struct ViewResult {
   double psnr = 0, ssim = 0, lpips = std::numeric_limits<double>::quiet_NaN();
-  double acc_max = 0;       // largest accumulated opacity (near 0 everywhere: a collapsed model)
+  double acc_max = 0;  // largest accumulated opacity (near 0 everywhere: a collapsed model)
   // Rays whose final transmittance 1 - acc is below 1e-3 and 1e-4 (opaque: early ray
   // termination pays only on those), of `rays` rendered.
   int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;
-  double seconds = 0;       // render time
-  torch::Tensor pred, gt;   // (H, W, 3) float32 CPU, black outside the valid rays
+  double seconds = 0;      // render time
+  torch::Tensor pred, gt;  // (H, W, 3) float32 CPU, black outside the valid rays
   render::RenderStats stats;
 };
 // With `frames`, the frame is prepared through it (reused from the previous view when the

@@ -49,7 +49,7 @@ const std::vector<std::pair<std::string, std::string>>& renames() {
 }
 
 std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path& path,
-                                                    const std::string& entry) {
+                                                     const std::string& entry) {
   const std::string source = path.string();
   check_checkpoint_archive(path);  // stored records inside the file: no allocation beyond its size
   std::unique_ptr<caffe2::serialize::PyTorchStreamReader> reader;
@@ -78,7 +78,8 @@ std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path
   ext.persistent_load = [&](const Value& pid) -> Value {
     // ('storage', storage type, key, location, numel)
     const auto& t = pid.as_list();
-    if (t.size() < 5 || t[0].as_str() != "storage") fail(source, ": unexpected persistent id ", pid.type_name());
+    if (t.size() < 5 || t[0].as_str() != "storage")
+      fail(source, ": unexpected persistent id ", pid.type_name());
     const auto dtype = storage_type(t[1].as_object().cls, source);
     const std::string key = t[2].as_str();
     const int64_t numel = t[4].as_int();
@@ -90,7 +91,8 @@ std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path
       const int64_t itemsize = static_cast<int64_t>(c10::elementSize(dtype));
       if (numel < 0 || size % static_cast<size_t>(itemsize) != 0 ||
           static_cast<int64_t>(size / static_cast<size_t>(itemsize)) != numel)
-        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel, " elements of ", itemsize, " bytes");
+        fail(source, ": storage '", record, "' has ", size, " bytes, expected ", numel,
+             " elements of ", itemsize, " bytes");
       auto tensor = torch::empty({numel}, dtype);
       std::memcpy(tensor.data_ptr(), data.get(), size);
       if (swap_bytes && itemsize > 1) {
@@ -126,25 +128,28 @@ std::map<std::string, torch::Tensor> read_state_dict(const std::filesystem::path
   ext.globals["torch.torch_version.TorchVersion"] = [](const Value::List& a) {
     return a.empty() ? Value::str("") : a[0];
   };
-  ext.globals["collections.Counter"] = [](const Value::List& a) { return a.empty() ? Value::dict({}) : a[0]; };
-  for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage", "LongStorage",
-                        "IntStorage", "ShortStorage", "CharStorage", "ByteStorage", "BoolStorage",
-                        "UntypedStorage"})
+  ext.globals["collections.Counter"] = [](const Value::List& a) {
+    return a.empty() ? Value::dict({}) : a[0];
+  };
+  for (const char* s : {"FloatStorage", "DoubleStorage", "HalfStorage", "BFloat16Storage",
+                        "LongStorage", "IntStorage", "ShortStorage", "CharStorage", "ByteStorage",
+                        "BoolStorage", "UntypedStorage"})
     ext.globals[std::string("torch.") + s] = nullptr;
 
-  const Value root = io::parse_pickle(std::string_view(static_cast<const char*>(pkl.get()), pkl_size),
-                                      source + ":data.pkl", ext);
+  const Value root = io::parse_pickle(
+      std::string_view(static_cast<const char*>(pkl.get()), pkl_size), source + ":data.pkl", ext);
   const Value* net = root.kind() == Value::Kind::Dict ? root.find(entry) : nullptr;
   std::map<std::string, torch::Tensor> out;
   flatten(net ? *net : root, "", out);
-  if (out.empty()) fail(source, ": no tensors found", net ? " under '" + entry + "'" : std::string());
+  if (out.empty())
+    fail(source, ": no tensors found", net ? " under '" + entry + "'" : std::string());
   return out;
 }
 
 }  // namespace
 
 std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
-                                                          const std::string& entry) {
+                                                           const std::string& entry) {
   // LibTorch's zip reader throws c10::Error for a corrupt record (a damaged local header, data
   // past the end): the file's error like any other, not a bug.
   try {
@@ -160,7 +165,8 @@ std::string reference_name(const std::string& name) {
   return name;
 }
 
-ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
+ImportReport import_reference_state(TransHumanImpl& model,
+                                    const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source) {
   if (model.config().representation != Representation::transhuman)
     fail(source, ": reference checkpoints hold the TransHuman representation, not '",
@@ -180,11 +186,15 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
     check_finite(src, source + ": tensor '" + ref + "'");
     if (src.dim() == 3 && src.size(2) == 1 && dst.dim() == 2) src = src.squeeze(2);  // Conv1d k=1
     if (src.is_floating_point() != dst.is_floating_point() || src.scalar_type() == torch::kBool)
-      fail(source, ": key '", ref, "' holds ", c10::toString(src.scalar_type()), " values, the model expects ",
-           c10::toString(dst.scalar_type()), " (not a TransHuman reference checkpoint?)");
+      fail(source, ": key '", ref, "' holds ", c10::toString(src.scalar_type()),
+           " values, the model expects ", c10::toString(dst.scalar_type()),
+           " (not a TransHuman reference checkpoint?)");
     if (src.sizes() != dst.sizes())
-      fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ", dst.sizes(),
-           config_keys_for(name).shape.empty() ? "" : " (decided by " + config_keys_for(name).shape + ")");
+      fail(source, ": key '", ref, "' has shape ", it->second.sizes(), ", the model expects ",
+           dst.sizes(),
+           config_keys_for(name).shape.empty()
+               ? ""
+               : " (decided by " + config_keys_for(name).shape + ")");
     copies.emplace_back(dst, src);
     used.insert(ref);
     report.loaded.push_back(ref);
@@ -193,15 +203,18 @@ ImportReport import_reference_state(TransHumanImpl& model, const std::map<std::s
   for (auto& b : model.named_buffers()) visit(b.key(), b.value());
   // What the reference holds but does not use (METHOD 8) is skipped; any other key means the file
   // is not what it claims to be (another network or version), so nothing is copied.
-  static const char* const kUnused[] = {"encoder.model.layer3.", "encoder.model.layer4.", "encoder.model.fc.",
-                                        "ViT.cls_token", "ViT.mask_token", "xyzc_net.",
-                                        "encoder.PE_color.", "ViT.PE.", "PE_relative."};
+  static const char* const kUnused[] = {"encoder.model.layer3.", "encoder.model.layer4.",
+                                        "encoder.model.fc.",     "ViT.cls_token",
+                                        "ViT.mask_token",        "xyzc_net.",
+                                        "encoder.PE_color.",     "ViT.PE.",
+                                        "PE_relative."};
   for (const auto& [k, v] : state) {
     if (used.count(k)) continue;
     const bool known = std::any_of(std::begin(kUnused), std::end(kUnused),
                                    [&](const char* prefix) { return k.rfind(prefix, 0) == 0; });
     if (!known)
-      fail(source, ": key '", k, "' is not part of the TransHuman reference network (another model or version?)");
+      fail(source, ": key '", k,
+           "' is not part of the TransHuman reference network (another model or version?)");
     report.ignored.push_back(k);
   }
   torch::NoGradGuard no_grad;

@@ -26,7 +26,7 @@ namespace th::pipeline {
 // dict itself works too. Nested dicts are flattened with '.' like a state dict (numbers become
 // 0-d tensors). Throws th::Error naming the file.
 std::map<std::string, torch::Tensor> read_torch_state_dict(const std::filesystem::path& path,
-                                                          const std::string& entry = "net");
+                                                           const std::string& entry = "net");
 
 struct ImportReport {
   std::vector<std::string> loaded;   // reference names copied into the model
@@ -41,8 +41,10 @@ std::string reference_name(const std::string& model_name);
 // mis-shaped key, a key holding integers or booleans where the model has weights, or a key the
 // reference network does not have (its known unused parts, METHOD 8, are skipped), and the
 // source; nothing is modified then.
-ImportReport import_reference_state(model::TransHumanImpl& model, const std::map<std::string, torch::Tensor>& state,
+ImportReport import_reference_state(model::TransHumanImpl& model,
+                                    const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source);
-ImportReport import_reference_checkpoint(model::TransHumanImpl& model, const std::filesystem::path& path);
+ImportReport import_reference_checkpoint(model::TransHumanImpl& model,
+                                         const std::filesystem::path& path);
 
 }  // namespace th::pipeline

@@ -32,8 +32,8 @@ BodyDistance::BodyDistance(const torch::Tensor& vertices, double radius) : radiu
   for (int64_t i = 0; i < nv; ++i) {
     int64_t c[3];
     for (int d = 0; d < 3; ++d)
-      c[d] = std::clamp<int64_t>(static_cast<int64_t>(std::floor((p[3 * i + d] - origin_[d]) / radius)), 0,
-                                 dims_[d] - 1);
+      c[d] = std::clamp<int64_t>(
+          static_cast<int64_t>(std::floor((p[3 * i + d] - origin_[d]) / radius)), 0, dims_[d] - 1);
     cell_of[i] = (c[2] * dims_[1] + c[1]) * dims_[0] + c[0];
     ++cell_start_[cell_of[i] + 1];
   }
@@ -47,7 +47,8 @@ BodyDistance::BodyDistance(const torch::Tensor& vertices, double radius) : radiu
 }
 
 torch::Tensor BodyDistance::near(const torch::Tensor& pts) const {
-  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "culling points must be (N, 3), got ", pts.sizes());
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "culling points must be (N, 3), got ",
+              pts.sizes());
   const auto q = pts.detach().to(torch::kCPU, torch::kDouble).contiguous();
   const int64_t n = q.size(0);
   auto out = torch::zeros({n}, torch::kBool);
@@ -66,9 +67,12 @@ torch::Tensor BodyDistance::near(const torch::Tensor& pts) const {
       }
       if (outside) continue;
       bool hit = false;
-      for (int64_t z = std::max<int64_t>(c[2] - 1, 0); z <= std::min(c[2] + 1, dims_[2] - 1) && !hit; ++z)
-        for (int64_t y = std::max<int64_t>(c[1] - 1, 0); y <= std::min(c[1] + 1, dims_[1] - 1) && !hit; ++y)
-          for (int64_t xx = std::max<int64_t>(c[0] - 1, 0); xx <= std::min(c[0] + 1, dims_[0] - 1) && !hit; ++xx) {
+      for (int64_t z = std::max<int64_t>(c[2] - 1, 0);
+           z <= std::min(c[2] + 1, dims_[2] - 1) && !hit; ++z)
+        for (int64_t y = std::max<int64_t>(c[1] - 1, 0);
+             y <= std::min(c[1] + 1, dims_[1] - 1) && !hit; ++y)
+          for (int64_t xx = std::max<int64_t>(c[0] - 1, 0);
+               xx <= std::min(c[0] + 1, dims_[0] - 1) && !hit; ++xx) {
             const int64_t cell = (z * dims_[1] + y) * dims_[0] + xx;
             for (int64_t k = cell_start_[cell]; k < cell_start_[cell + 1]; ++k) {
               const double dx = vertices_[3 * k] - x[0], dy = vertices_[3 * k + 1] - x[1],
@@ -85,8 +89,8 @@ torch::Tensor BodyDistance::near(const torch::Tensor& pts) const {
   return out.to(pts.device());
 }
 
-torch::Tensor BodyDistance::near_brute_force(const torch::Tensor& pts, const torch::Tensor& vertices,
-                                             double radius) {
+torch::Tensor BodyDistance::near_brute_force(const torch::Tensor& pts,
+                                             const torch::Tensor& vertices, double radius) {
   const auto p = pts.to(torch::kDouble), v = vertices.to(torch::kDouble);
   const auto d2 = (p.unsqueeze(1) - v.unsqueeze(0)).pow(2).sum(-1);
   return std::get<0>(d2.min(1)) < radius * radius;

@@ -31,8 +31,8 @@ class BodyDistance {
   double radius_;
   double origin_[3];
   int64_t dims_[3];
-  std::vector<double> vertices_;      // sorted by cell, xyz interleaved
-  std::vector<int64_t> cell_start_;   // per cell: first vertex; size cells + 1
+  std::vector<double> vertices_;     // sorted by cell, xyz interleaved
+  std::vector<int64_t> cell_start_;  // per cell: first vertex; size cells + 1
 };
 
 }  // namespace th::render

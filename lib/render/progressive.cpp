@@ -29,7 +29,8 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
   // Culling keeps a fraction of the samples: take several chunks' worth of rays per batch and
   // pass the kept samples to the field in full chunks. The march takes more rays per batch, so
   // that its later rounds (few samples per ray) still fill chunks.
-  const int64_t batch = tau > 0 ? std::max<int64_t>(1, kMarchSamples / S) : std::max<int64_t>(1, 8 * chunk / S);
+  const int64_t batch =
+      tau > 0 ? std::max<int64_t>(1, kMarchSamples / S) : std::max<int64_t>(1, 8 * chunk / S);
   RenderResult out;
   out.stats.rays = R;
   out.stats.points = R * S;
@@ -85,7 +86,10 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
         torch::Tensor idx;
         {
           ScopedTimer t(profile, "culling");
-          idx = (keep & rank.ge(first) & rank.lt(first + m) & running.unsqueeze(1)).flatten().nonzero().flatten();
+          idx = (keep & rank.ge(first) & rank.lt(first + m) & running.unsqueeze(1))
+                    .flatten()
+                    .nonzero()
+                    .flatten();
         }
         evaluate(idx);
         ScopedTimer t(profile, "compositing");
@@ -102,7 +106,8 @@ RenderResult render_progressive(RadianceField& field, const BodyDistance& body, 
     out.acc.slice(0, b, b + n).copy_(comp.acc);
   });
   // Kept samples not evaluated: those the march skipped.
-  out.stats.terminated_points = out.stats.points - out.stats.culled_points - out.stats.density_points;
+  out.stats.terminated_points =
+      out.stats.points - out.stats.culled_points - out.stats.density_points;
   return out;
 }
 

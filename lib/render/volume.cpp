@@ -16,14 +16,14 @@ Rays Rays::slice(int64_t begin, int64_t end) const {
 }
 
 Rays Rays::index(const torch::Tensor& rows) const {
-  return {origins.index_select(0, rows), directions.index_select(0, rows), near.index_select(0, rows),
-          far.index_select(0, rows)};
+  return {origins.index_select(0, rows), directions.index_select(0, rows),
+          near.index_select(0, rows), far.index_select(0, rows)};
 }
 
 torch::Tensor sample_depths(const torch::Tensor& near, const torch::Tensor& far, int64_t samples,
                             bool stratified) {
-  TORCH_CHECK(near.dim() == 1 && far.sizes() == near.sizes(), "near/far must be (R), got ", near.sizes(),
-              " and ", far.sizes());
+  TORCH_CHECK(near.dim() == 1 && far.sizes() == near.sizes(), "near/far must be (R), got ",
+              near.sizes(), " and ", far.sizes());
   const auto t = torch::linspace(0, 1, samples, near.options());
   auto z = near.unsqueeze(1) * (1 - t) + far.unsqueeze(1) * t;
   if (stratified) {
@@ -37,22 +37,27 @@ torch::Tensor sample_depths(const torch::Tensor& near, const torch::Tensor& far,
 
 torch::Tensor segment_lengths(const torch::Tensor& z, const torch::Tensor& directions) {
   const auto S = z.size(1);
-  return torch::cat({z.narrow(1, 1, S - 1) - z.narrow(1, 0, S - 1), torch::full({z.size(0), 1}, 1e10, z.options())},
+  return torch::cat({z.narrow(1, 1, S - 1) - z.narrow(1, 0, S - 1),
+                     torch::full({z.size(0), 1}, 1e10, z.options())},
                     1) *
          directions.norm(2, 1, true);
 }
 
-Composite composite(const torch::Tensor& raw, const torch::Tensor& z, const torch::Tensor& directions) {
+Composite composite(const torch::Tensor& raw, const torch::Tensor& z,
+                    const torch::Tensor& directions) {
   TORCH_CHECK(raw.dim() == 3 && raw.size(2) == 4, "raw must be (R, S, 4), got ", raw.sizes());
   TORCH_CHECK(z.sizes() == raw.sizes().slice(0, 2), "z must be (R, S) like raw, got ", z.sizes());
-  TORCH_CHECK(directions.dim() == 2 && directions.size(0) == raw.size(0), "directions must be (R, 3)");
+  TORCH_CHECK(directions.dim() == 2 && directions.size(0) == raw.size(0),
+              "directions must be (R, 3)");
   const auto S = z.size(1);
   const auto dists = segment_lengths(z, directions);
   const auto rgb = torch::sigmoid(raw.narrow(2, 0, 3));
   const auto alpha = 1 - torch::exp(-torch::relu(raw.select(2, 3)) * dists);
   // Exclusive cumulative product of (1 - alpha + 1e-10).
-  const auto trans = torch::cumprod(
-      torch::cat({torch::ones({z.size(0), 1}, z.options()), 1 - alpha + 1e-10}, 1), 1).narrow(1, 0, S);
+  const auto trans =
+      torch::cumprod(torch::cat({torch::ones({z.size(0), 1}, z.options()), 1 - alpha + 1e-10}, 1),
+                     1)
+          .narrow(1, 0, S);
   Composite c;
   c.weights = alpha * trans;
   c.rgb = (c.weights.unsqueeze(2) * rgb).sum(1);
@@ -70,8 +75,9 @@ RenderResult VolumeRenderer::render(RadianceField& field, const Rays& rays, bool
   // Without autograd, ray batches of chunk_points samples bound the memory. With autograd the
   // field bounds it (FrameField recomputes its chunks in the backward pass) and one call for all
   // rays lets it build its per-frame gradient buffers once.
-  const int64_t batch = torch::GradMode::is_enabled() ? std::max<int64_t>(R, 1)
-                                                      : std::max<int64_t>(1, config_.chunk_points / S);
+  const int64_t batch = torch::GradMode::is_enabled()
+                            ? std::max<int64_t>(R, 1)
+                            : std::max<int64_t>(1, config_.chunk_points / S);
   std::vector<torch::Tensor> rgb, depth, acc;
   RenderResult out;
   out.stats.rays = R;

@@ -41,7 +41,8 @@ class ScopedTimer {
   }
   ~ScopedTimer() {
     if (!profile_) return;
-    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     const double children = profile_->open.back();
     profile_->open.pop_back();
     profile_->seconds[stage_] += elapsed - children;
@@ -81,20 +82,21 @@ struct Composite {
   torch::Tensor weights;  // (R, S)
 };
 
-// METHOD 4 compositing: delta_i = (z_{i+1} - z_i) |d| (last: 1e10 |d|), alpha = 1 - exp(-relu(sigma)
-// delta), T_i = prod_{j<i} (1 - alpha_j + 1e-10), w = alpha T; rgb = sum w sigmoid(rgb_raw),
-// depth = sum w z, acc = sum w; black background.
-// raw: (R, S, 4), z: (R, S), directions: (R, 3).
-Composite composite(const torch::Tensor& raw, const torch::Tensor& z, const torch::Tensor& directions);
+// METHOD 4 compositing: delta_i = (z_{i+1} - z_i) |d| (last: 1e10 |d|), alpha = 1 -
+// exp(-relu(sigma) delta), T_i = prod_{j<i} (1 - alpha_j + 1e-10), w = alpha T; rgb = sum w
+// sigmoid(rgb_raw), depth = sum w z, acc = sum w; black background. raw: (R, S, 4), z: (R, S),
+// directions: (R, 3).
+Composite composite(const torch::Tensor& raw, const torch::Tensor& z,
+                    const torch::Tensor& directions);
 
 struct RenderStats {
   int64_t rays = 0;
-  int64_t points = 0;          // rays x samples
-  int64_t culled_points = 0;   // farther than the culling distance from the body
-  int64_t density_points = 0;  // points whose density was evaluated
-  int64_t color_points = 0;    // points whose colour was evaluated
+  int64_t points = 0;             // rays x samples
+  int64_t culled_points = 0;      // farther than the culling distance from the body
+  int64_t density_points = 0;     // points whose density was evaluated
+  int64_t color_points = 0;       // points whose colour was evaluated
   int64_t terminated_points = 0;  // kept points skipped by early ray termination
-  int64_t empty_rays = 0;      // rays without any kept point (output 0)
+  int64_t empty_rays = 0;         // rays without any kept point (output 0)
 };
 
 struct RenderResult {

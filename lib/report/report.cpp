@@ -108,7 +108,9 @@ std::string read_summary(const fs::path& eval) {
 }
 
 // Whole or not at all (a full disk leaves the previous file, and the error names this one).
-void write_text(const fs::path& path, const std::string& text) { io::write_file_atomic(path, text); }
+void write_text(const fs::path& path, const std::string& text) {
+  io::write_file_atomic(path, text);
+}
 
 std::string base64(const std::string& bytes) {
   static const char* table = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -131,11 +133,20 @@ std::string html_escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -149,7 +160,6 @@ std::string utc_now() {
   std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", &tm);
   return buf;
 }
-
 
 // A path segment with every byte but RFC 3986's unreserved ones percent-encoded.
 std::string percent_encoded(const std::string& segment) {
@@ -170,7 +180,8 @@ std::string percent_encoded(const std::string& segment) {
 // `path` as the page refers to it: relative to `out`, "./" first and each folder name
 // percent-encoded, so that no name (a folder called "javascript:...") becomes a URL scheme.
 std::string href(const fs::path& path, const fs::path& out) {
-  const auto rel = fs::weakly_canonical(fs::absolute(path)).lexically_relative(fs::weakly_canonical(fs::absolute(out)));
+  const auto rel = fs::weakly_canonical(fs::absolute(path))
+                       .lexically_relative(fs::weakly_canonical(fs::absolute(out)));
   std::string s = ".";
   for (const auto& part : rel) s += "/" + percent_encoded(part.string());
   return s;
@@ -302,9 +313,11 @@ nlohmann::ordered_json eval_json(const fs::path& eval, const fs::path& out,
       panels.push_back(nullptr);
   }
   auto& files = e["files"] = nlohmann::ordered_json::object();
-  for (const char* name : {"summary.json", "per_image.csv", "results.md", "config.yaml", "index.html"}) {
+  for (const char* name :
+       {"summary.json", "per_image.csv", "results.md", "config.yaml", "index.html"}) {
     // The evaluation's own page is linked, not copied: its links are relative to its folder.
-    if (!fs::exists(eval / name) || (std::string(name) == "index.html" && !path_within(eval, out))) continue;
+    if (!fs::exists(eval / name) || (std::string(name) == "index.html" && !path_within(eval, out)))
+      continue;
     if (std::string(name) == "index.html" && fs::equivalent(eval, out)) continue;
     files[name] = href(bring_in(eval / name, out, fs::path(copy_name) / name), out);
   }
@@ -320,7 +333,9 @@ void write_assets(const fs::path& out) {
 std::string bring_three_js(const fs::path& out) {
   const fs::path root = find_three_js();
   if (root.empty()) {
-    spdlog::warn("report: three.js not found (Debian: apt-get install libjs-three); the page has no 3D viewer");
+    spdlog::warn(
+        "report: three.js not found (Debian: apt-get install libjs-three); the page has no 3D "
+        "viewer");
     return "";
   }
   std::string tags;
@@ -346,13 +361,15 @@ void check_page_folder(const fs::path& out, const std::vector<fs::path>& evals) 
   if (!fs::exists(page, ec)) return;
   const std::string old = read_text(page, "page");
   if (old.find(kGenerator) == std::string::npos)
-    fail("report: '", page.string(), "' exists and was not written by TransHuman; choose another --out");
+    fail("report: '", page.string(),
+         "' exists and was not written by TransHuman; choose another --out");
   const bool shown = std::any_of(evals.begin(), evals.end(), [&](const fs::path& e) {
     std::error_code eq;
     return fs::equivalent(e, out, eq);
   });
   if (old.find(kEvaluationPage) != std::string::npos && !shown)
-    fail("report: '", out.string(), "' is another evaluation's folder; its page would be replaced: choose "
+    fail("report: '", out.string(),
+         "' is another evaluation's folder; its page would be replaced: choose "
          "another --out");
 }
 
@@ -361,16 +378,18 @@ void check_page_folder(const fs::path& out, const std::vector<fs::path>& evals) 
 std::string page_html(const std::string& title, const nlohmann::ordered_json& data,
                       const std::string& scripts, bool evaluation_folder = false) {
   return "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n" + kGenerator + "\n" +
-         (evaluation_folder ? kEvaluationPage + "\n" : std::string()) + "<title>" +
-         html_escape(title) +
+         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n" +
+         kGenerator + "\n" + (evaluation_folder ? kEvaluationPage + "\n" : std::string()) +
+         "<title>" + html_escape(title) +
          "</title>\n<link rel=\"stylesheet\" href=\"report.css\">\n"
          "<script>\nwindow.TH_ERRORS = [];\n"
          "window.addEventListener('error', (e) => window.TH_ERRORS.push(e.message || "
          "('cannot load ' + (e.target && (e.target.src || e.target.href)))), true);\n"
-         "window.addEventListener('unhandledrejection', (e) => window.TH_ERRORS.push(String(e.reason)));\n"
+         "window.addEventListener('unhandledrejection', (e) => "
+         "window.TH_ERRORS.push(String(e.reason)));\n"
          "const thConsoleError = console.error.bind(console);\n"
-         "console.error = (...args) => { window.TH_ERRORS.push(args.map(String).join(' ')); thConsoleError(...args); };\n"
+         "console.error = (...args) => { window.TH_ERRORS.push(args.map(String).join(' ')); "
+         "thConsoleError(...args); };\n"
          "</script>\n</head>\n<body>\n<header><h1>" +
          html_escape(title) +
          "</h1><p class=\"meta\" id=\"meta\"></p></header>\n<main id=\"report\"></main>\n"
@@ -398,10 +417,14 @@ std::string script_json(const nlohmann::ordered_json& value) {
   out.reserve(json.size());
   for (const char c : json) {
     // Outside strings JSON has none of these, so escaping them keeps the text the same JSON.
-    if (c == '<') out += "\\u003c";
-    else if (c == '>') out += "\\u003e";
-    else if (c == '&') out += "\\u0026";
-    else out += c;
+    if (c == '<')
+      out += "\\u003c";
+    else if (c == '>')
+      out += "\\u003e";
+    else if (c == '&')
+      out += "\\u0026";
+    else
+      out += c;
   }
   return out;
 }
@@ -426,16 +449,19 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   for (const auto& [label, target] : sources.links) {
     // A URL scheme: a letter, then letters, digits, "+", "-" or ".", up to the first ":".
     const size_t colon = target.find(':');
-    const bool scheme = colon != std::string::npos && colon > 0 && std::isalpha((unsigned char)target[0]) &&
-                        target.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789+-.") >= colon;
+    const bool scheme =
+        colon != std::string::npos && colon > 0 && std::isalpha((unsigned char)target[0]) &&
+        target.find_first_not_of(
+            "abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789+-.") >= colon;
     const std::string name = scheme ? target.substr(0, colon) : "";
     if (scheme && name != "http" && name != "https")
-      fail("report: link '", label, "' = '", target, "': only relative links and http(s) URLs are allowed");
+      fail("report: link '", label, "' = '", target,
+           "': only relative links and http(s) URLs are allowed");
   }
   check_page_folder(out, sources.evals);
   fs::create_directories(out);
   auto evals = nlohmann::ordered_json::array();
-  bool evaluation_folder = false;  // the page of the evaluation in `out` itself
+  bool evaluation_folder = false;            // the page of the evaluation in `out` itself
   std::set<std::string> taken = kPageFiles;  // and the mesh's copy
   const std::string mesh_name = sources.mesh.empty() ? "" : copy_name(sources.mesh, taken);
   for (const fs::path& dir : sources.evals) {
@@ -488,7 +514,8 @@ fs::path write_page(const PageSources& sources, const fs::path& out) {
   return page;
 }
 
-fs::path write_ablation_page(const std::vector<AblationRow>& rows, const std::string& title, const fs::path& out) {
+fs::path write_ablation_page(const std::vector<AblationRow>& rows, const std::string& title,
+                             const fs::path& out) {
   if (rows.empty()) fail("report: no ablation rows to show");
   check_page_folder(out, {});
   fs::create_directories(out);

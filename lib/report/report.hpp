@@ -7,10 +7,9 @@
 // viewer uses three.js's classic scripts from Debian's libjs-three, copied into the folder; the
 // mesh travels as base64 in mesh.js because a file:// page may not fetch other files.
 
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <utility>
 #include <vector>
@@ -50,7 +49,8 @@ struct AblationRow {
 // Writes <out>/index.html putting the rows side by side: table, a bar chart per metric, and
 // paired per-image differences against the row named "full" (when present). Links each row's
 // own page (the index.html in its evaluation folder).
-std::filesystem::path write_ablation_page(const std::vector<AblationRow>& rows, const std::string& title,
+std::filesystem::path write_ablation_page(const std::vector<AblationRow>& rows,
+                                          const std::string& title,
                                           const std::filesystem::path& out);
 
 // The folder with libjs-three's classic scripts (three.min.js, OrbitControls.js, PLYLoader.js):

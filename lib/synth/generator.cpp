@@ -69,7 +69,9 @@ void parallel_for(int64_t n, int threads, const std::function<void(int64_t)>& fn
 // of LBS and take a third of the CPU); restored afterwards.
 class LibraryThreads {
  public:
-  explicit LibraryThreads(int n) : torch_and_blas_(n), cv_(cv::getNumThreads()) { cv::setNumThreads(n); }
+  explicit LibraryThreads(int n) : torch_and_blas_(n), cv_(cv::getNumThreads()) {
+    cv::setNumThreads(n);
+  }
   ~LibraryThreads() { cv::setNumThreads(cv_); }
 
  private:
@@ -79,7 +81,8 @@ class LibraryThreads {
 
 // Every file through a new temporary file renamed over the target (never through a link).
 void write_bytes(const fs::path& path, const std::vector<uchar>& bytes) {
-  write_file_atomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  write_file_atomic(path,
+                    std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
 void write_bytes(const fs::path& path, const std::string& bytes) { write_file_atomic(path, bytes); }
@@ -119,8 +122,8 @@ std::vector<double> values(const torch::Tensor& t) {
 
 // One frame's fit as EasyMocap writes it: a list of people (one here, id 0). nlohmann writes
 // doubles with the digits that read back to the same value.
-std::string easymocap_smpl(const torch::Tensor& poses, const torch::Tensor& Rh, const torch::Tensor& Th,
-                           const torch::Tensor& shapes) {
+std::string easymocap_smpl(const torch::Tensor& poses, const torch::Tensor& Rh,
+                           const torch::Tensor& Th, const torch::Tensor& shapes) {
   nlohmann::ordered_json person;
   person["id"] = 0;
   person["Rh"] = {values(Rh)};
@@ -137,7 +140,8 @@ cv::Mat cv_matrix(const torch::Tensor& t, int rows, int cols) {
 
 // intri.yml and extri.yml of one person, holding what the ZJU-MoCap reader makes of annots.npy
 // (T through millimetres and back), so both layouts of a person read the same.
-void write_easymocap_calibration(const fs::path& dir, const FolderLayout& l, const std::vector<CameraCalib>& cameras) {
+void write_easymocap_calibration(const fs::path& dir, const FolderLayout& l,
+                                 const std::vector<CameraCalib>& cameras) {
   std::vector<std::string> names;
   for (int k = 0; k < l.num_cameras(); ++k) names.push_back(easymocap_camera(k));
   for (const char* file : {"intri.yml", "extri.yml"}) {
@@ -366,14 +370,14 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
       write_bytes(dir / "output" / "smpl" / (easymocap_frame(f) + ".json"),
                   easymocap_smpl(poses, row(pub.Rh), row(pub.Th), r.published_shapes));
     } else {
-    io::Value::Dict params;
-    params.emplace_back(io::Value::str("poses"), array_value(poses.reshape({1, 72})));
-    params.emplace_back(io::Value::str("Rh"), array_value(row(pub.Rh).reshape({1, 3})));
-    params.emplace_back(io::Value::str("Th"), array_value(row(pub.Th).reshape({1, 3})));
-    params.emplace_back(io::Value::str("shapes"),
-                        array_value(r.published_shapes.reshape({1, kNumBetas})));
-    io::write_npy_value(dir / r.layout.params_path(f), io::Value::dict(std::move(params)));
-    io::write_npy(dir / r.layout.vertices_path(f), verts.to(torch::kFloat32));
+      io::Value::Dict params;
+      params.emplace_back(io::Value::str("poses"), array_value(poses.reshape({1, 72})));
+      params.emplace_back(io::Value::str("Rh"), array_value(row(pub.Rh).reshape({1, 3})));
+      params.emplace_back(io::Value::str("Th"), array_value(row(pub.Th).reshape({1, 3})));
+      params.emplace_back(io::Value::str("shapes"),
+                          array_value(r.published_shapes.reshape({1, kNumBetas})));
+      io::write_npy_value(dir / r.layout.params_path(f), io::Value::dict(std::move(params)));
+      io::write_npy(dir / r.layout.vertices_path(f), verts.to(torch::kFloat32));
     }
 
     const double gx = truth.Th[0], gy = truth.Th[1];
@@ -381,14 +385,17 @@ Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
       const RenderedView v =
           render_view(pm, r.views[k], c.image.width, c.image.height, c.image.supersample, gx, gy);
       const std::string camera = easymocap_camera(k), frame = easymocap_frame(f);
-      write_image(easymocap ? dir / "images" / camera / (frame + ".jpg") : dir / r.layout.image_path(f, k), v.bgr, jpeg);
+      write_image(
+          easymocap ? dir / "images" / camera / (frame + ".jpg") : dir / r.layout.image_path(f, k),
+          v.bgr, jpeg);
       cv::Mat coverage = v.alpha > 0.5f;  // 255 where covered
       cv::Mat mask = coverage / 255;      // ZJU-MoCap masks are 0/1
       if (easymocap) {
         // One mask, 0/255: what the ZJU-MoCap reader makes of mask/ and mask_cihp/ together.
         cv::Mat person;
         if (r.person.masks == MaskStyle::Both) {
-          cv::Mat missed = (v.labels == cihp::kHair) | (v.labels == cihp::kLeftShoe) | (v.labels == cihp::kRightShoe);
+          cv::Mat missed = (v.labels == cihp::kHair) | (v.labels == cihp::kLeftShoe) |
+                           (v.labels == cihp::kRightShoe);
           mask.setTo(0, missed);
           person = (mask != 0) | ((v.labels != 0) & (v.alpha > 0.75f));
         } else if (r.person.masks == MaskStyle::Mask) {

@@ -19,11 +19,11 @@ struct PatchLoss {
 // rgb: (R, 3) rendered colours of the sample's rays; patch_index: (R) the slot of each ray in
 // the P patches of S x S pixels (flattened, patch-major); target: (P, 3, S, S) in [0, 1].
 // `lpips` null: MSE only.
-PatchLoss patch_loss(const torch::Tensor& rgb, const torch::Tensor& patch_index, const torch::Tensor& target,
-                     metrics::LpipsImpl* lpips, double lpips_weight);
+PatchLoss patch_loss(const torch::Tensor& rgb, const torch::Tensor& patch_index,
+                     const torch::Tensor& target, metrics::LpipsImpl* lpips, double lpips_weight);
 
 // The patches (P, 3, S, S) that `rgb` fills, the rest black (what patch_loss compares).
-torch::Tensor patch_canvas(const torch::Tensor& rgb, const torch::Tensor& patch_index, int64_t patches,
-                           int64_t size);
+torch::Tensor patch_canvas(const torch::Tensor& rgb, const torch::Tensor& patch_index,
+                           int64_t patches, int64_t size);
 
 }  // namespace th::train

@@ -1,12 +1,11 @@
 #include "train/plot.hpp"
 
-#include <nlohmann/json.hpp>
-#include <opencv2/imgproc.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
@@ -30,8 +29,8 @@ struct Series {
   std::vector<double> x, y;
 };
 
-void draw_panel(cv::Mat& img, cv::Rect area, const std::vector<std::pair<Series, cv::Scalar>>& lines,
-                const std::string& title) {
+void draw_panel(cv::Mat& img, cv::Rect area,
+                const std::vector<std::pair<Series, cv::Scalar>>& lines, const std::string& title) {
   cv::rectangle(img, area, cv::Scalar(200, 200, 200));
   double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
   for (const auto& [s, c] : lines)
@@ -54,37 +53,46 @@ void draw_panel(cv::Mat& img, cv::Rect area, const std::vector<std::pair<Series,
       if (s.x.size() < 40) cv::circle(img, p, 3, c, cv::FILLED, cv::LINE_AA);
   }
   char buf[64];
-  cv::putText(img, title, cv::Point(area.x + 4, area.y - 8), cv::FONT_HERSHEY_SIMPLEX, 0.5, cv::Scalar(20, 20, 20), 1, cv::LINE_AA);
+  cv::putText(img, title, cv::Point(area.x + 4, area.y - 8), cv::FONT_HERSHEY_SIMPLEX, 0.5,
+              cv::Scalar(20, 20, 20), 1, cv::LINE_AA);
   std::snprintf(buf, sizeof buf, "%.4g", y1);
-  cv::putText(img, buf, cv::Point(area.x - 58, area.y + 10), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
+  cv::putText(img, buf, cv::Point(area.x - 58, area.y + 10), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+              cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
   std::snprintf(buf, sizeof buf, "%.4g", y0);
-  cv::putText(img, buf, cv::Point(area.x - 58, area.y + area.height), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
+  cv::putText(img, buf, cv::Point(area.x - 58, area.y + area.height), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+              cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
   std::snprintf(buf, sizeof buf, "step %.0f", x0);
-  cv::putText(img, buf, cv::Point(area.x, area.y + area.height + 16), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
+  cv::putText(img, buf, cv::Point(area.x, area.y + area.height + 16), cv::FONT_HERSHEY_SIMPLEX, 0.4,
+              cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
   std::snprintf(buf, sizeof buf, "step %.0f", x1);
-  cv::putText(img, buf, cv::Point(area.x + area.width - 70, area.y + area.height + 16), cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
+  cv::putText(img, buf, cv::Point(area.x + area.width - 70, area.y + area.height + 16),
+              cv::FONT_HERSHEY_SIMPLEX, 0.4, cv::Scalar(60, 60, 60), 1, cv::LINE_AA);
 }
 
 }  // namespace
 
-bool plot_training_curve(const std::filesystem::path& metrics_jsonl, const std::filesystem::path& png) {
+bool plot_training_curve(const std::filesystem::path& metrics_jsonl,
+                         const std::filesystem::path& png) {
   std::ifstream in(metrics_jsonl);
   Series loss, psnr, val;
   for (std::string line; std::getline(in, line);) {
     const auto n = numbers(line);
     if (!n.count("step")) continue;
     const double step = n.at("step");
-    if (n.count("loss")) loss.x.push_back(step), loss.y.push_back(std::log10(std::max(n.at("loss"), 1e-8)));
+    if (n.count("loss"))
+      loss.x.push_back(step), loss.y.push_back(std::log10(std::max(n.at("loss"), 1e-8)));
     if (n.count("psnr")) psnr.x.push_back(step), psnr.y.push_back(n.at("psnr"));
     if (n.count("val_psnr")) val.x.push_back(step), val.y.push_back(n.at("val_psnr"));
   }
   if (loss.x.size() < 2) return false;
   cv::Mat img(360, 960, CV_8UC3, cv::Scalar(255, 255, 255));
-  draw_panel(img, cv::Rect(70, 30, 380, 290), {{loss, cv::Scalar(180, 80, 30)}}, "training loss (log10)");
+  draw_panel(img, cv::Rect(70, 30, 380, 290), {{loss, cv::Scalar(180, 80, 30)}},
+             "training loss (log10)");
   std::vector<std::pair<Series, cv::Scalar>> right{{psnr, cv::Scalar(40, 140, 40)}};
   if (!val.x.empty()) right.push_back({val, cv::Scalar(30, 30, 200)});
   draw_panel(img, cv::Rect(560, 30, 380, 290), right,
-             val.x.empty() ? "PSNR of training batches (dB)" : "PSNR: training batches (green), validation (red)");
+             val.x.empty() ? "PSNR of training batches (dB)"
+                           : "PSNR: training batches (green), validation (red)");
   video::write_png(png, img);
   return true;
 }

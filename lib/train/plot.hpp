@@ -8,6 +8,7 @@ namespace th::train {
 
 // Reads <metrics.jsonl> and writes the plot to `png`. Returns false (and writes nothing) when
 // the file has fewer than two logged steps.
-bool plot_training_curve(const std::filesystem::path& metrics_jsonl, const std::filesystem::path& png);
+bool plot_training_curve(const std::filesystem::path& metrics_jsonl,
+                         const std::filesystem::path& png);
 
 }  // namespace th::train

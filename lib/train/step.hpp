@@ -35,8 +35,10 @@ namespace th::train {
 // Sums over this process's samples (over all ranks after synchronise_step).
 struct StepStats {
   double loss = 0, mse = 0, lpips = 0, psnr = 0, rays = 0;
-  std::string bad_loss;  // why this process's sample failed: a non-finite loss, or no body in view (data parallel)
-  bool peer_failed = false;  // another rank's sample failed (data parallel): nothing was back-propagated
+  std::string bad_loss;  // why this process's sample failed: a non-finite loss, or no body in view
+                         // (data parallel)
+  bool peer_failed =
+      false;  // another rank's sample failed (data parallel): nothing was back-propagated
 };
 
 // What a step reads besides the samples.
@@ -53,8 +55,8 @@ struct StepContext {
 struct StepPosition {
   int64_t step = 0;
   int epoch = 0;
-  int rank = -1;                 // -1: a single process
-  std::string last_checkpoint;   // "" when none has been written yet
+  int rank = -1;                // -1: a single process
+  std::string last_checkpoint;  // "" when none has been written yet
 };
 
 // Takes one sample per entry of `ranks` from `loader` (stratified jitter seeded per sample of
@@ -62,13 +64,14 @@ struct StepPosition {
 // is a th::Error naming the step, the sample and the last good checkpoint, or with `comm` (several
 // ranks) only recorded in bad_loss: the ranks agree before each backward pass whether any sample
 // failed, and then none back-propagates (synchronise_step turns it into an error everywhere).
-StepStats accumulate_step(const StepContext& context, data::Prefetcher& loader, const std::vector<int>& ranks,
-                          int world, const StepPosition& where, dist::Communicator* comm);
+StepStats accumulate_step(const StepContext& context, data::Prefetcher& loader,
+                          const std::vector<int>& ranks, int world, const StepPosition& where,
+                          dist::Communicator* comm);
 
 // With `comm`: one small reduction of the statistics (and of whether a rank saw a non-finite
 // loss, then a th::Error everywhere), then the gradients averaged over the `world` samples.
 // Without: gradients divided by `per_process` when one process played several ranks.
-void synchronise_step(dist::Communicator* comm, StepStats& stats, model::TransHumanImpl& model, int world,
-                      int per_process, const StepPosition& where);
+void synchronise_step(dist::Communicator* comm, StepStats& stats, model::TransHumanImpl& model,
+                      int world, int per_process, const StepPosition& where);
 
 }  // namespace th::train

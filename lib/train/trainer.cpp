@@ -1,6 +1,5 @@
 #include "train/trainer.hpp"
 
-#include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
@@ -8,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <numeric>
 #include <optional>
 #include <sstream>
@@ -104,13 +104,17 @@ class Run {
 
  private:
   void on_lead(const std::function<void()>& fn, const std::string& what) {
-    if (comm_) comm_->on_lead(fn, what);
-    else fn();
+    if (comm_)
+      comm_->on_lead(fn, what);
+    else
+      fn();
   }
   StepPosition position(int epoch) const {
-    return {st_.step, epoch, comm_ ? proc_ : -1, last_ckpt_.empty() ? std::string() : last_ckpt_.string()};
+    return {st_.step, epoch, comm_ ? proc_ : -1,
+            last_ckpt_.empty() ? std::string() : last_ckpt_.string()};
   }
-  void record_step(const StepStats& stats, double seconds, double lr, int epoch, const data::Prefetcher& loader);
+  void record_step(const StepStats& stats, double seconds, double lr, int epoch,
+                   const data::Prefetcher& loader);
   void log_step(const StepStats& stats, double lr, int epoch, const data::Prefetcher& loader);
   bool out_of_time();
   void end_of_epoch(int epoch);
@@ -148,7 +152,11 @@ class Run {
 };
 
 Run::Run(const Config& config, const torch::Device& device, const TrainOptions& options)
-    : config_(config), tc_(config.train), device_(device), options_(options), comm_(options.comm.get()) {
+    : config_(config),
+      tc_(config.train),
+      device_(device),
+      options_(options),
+      comm_(options.comm.get()) {
   TORCH_CHECK(options.virtual_ranks >= 1, "train: virtual_ranks must be >= 1");
   procs_ = comm_ ? comm_->world_size() : 1;
   proc_ = comm_ ? comm_->rank() : 0;
@@ -169,7 +177,8 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   const auto smpl = data::load_body_model(config.data);
   train_set_ = std::make_shared<const data::Dataset>(config.data, config.data.train_setting,
                                                      data::Dataset::Mode::Train, smpl);
-  if (train_set_->size() == 0) fail("training setting '", config.data.train_setting, "' has no samples");
+  if (train_set_->size() == 0)
+    fail("training setting '", config.data.train_setting, "' has no samples");
   if (tc_.val_views > 0 && lead_)
     val_set_ = std::make_shared<const data::Dataset>(config.data, config.data.test_setting,
                                                      data::Dataset::Mode::Test, smpl);
@@ -180,8 +189,10 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   model_->to(device);
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));
   optim_ = std::make_unique<torch::optim::Adam>(
-      model_->parameters(), torch::optim::AdamOptions(tc_.lr).betas({tc_.beta1, tc_.beta2}).eps(tc_.eps));
-  if (tc_.lpips_weight > 0) lpips_ = metrics::try_load_lpips(tc_.lpips_weights, device, "the perceptual loss");
+      model_->parameters(),
+      torch::optim::AdamOptions(tc_.lr).betas({tc_.beta1, tc_.beta2}).eps(tc_.eps));
+  if (tc_.lpips_weight > 0)
+    lpips_ = metrics::try_load_lpips(tc_.lpips_weights, device, "the perceptual loss");
 
   canonical_ = smpl->v_template;
   if (options.resume && lead_) {
@@ -190,8 +201,9 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
     spdlog::info("resumed from {} at epoch {}, step {}", last_ckpt_.string(), st_.epoch, st_.step);
   } else if (!options.init_from.empty() && lead_) {
     pipeline::load_weights(*model_, options.init_from);
-    spdlog::info("fine-tuning: weights and token groups from {}; optimiser and schedule start afresh",
-                 options.init_from.string());
+    spdlog::info(
+        "fine-tuning: weights and token groups from {}; optimiser and schedule start afresh",
+        options.init_from.string());
   }
   // The token groups: the resumed checkpoint's, or made now from model.grouping (the only place
   // the k-means runs); the other ranks receive rank 0's with its state below.
@@ -200,9 +212,11 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   if (comm_ && tc_.sync_batchnorm) {
     dist::Communicator* comm = comm_;
     const int layers = model::synchronise_batchnorm(
-        *model_, std::make_shared<const model::StatsReducer>(
-                     [comm](torch::Tensor& t) { comm->sum_in_place(t, "synchronised BatchNorm (train.sync_batchnorm)"); }));
-    spdlog::info("synchronised BatchNorm: {} layers normalise over all {} ranks' images", layers, procs_);
+        *model_, std::make_shared<const model::StatsReducer>([comm](torch::Tensor& t) {
+          comm->sum_in_place(t, "synchronised BatchNorm (train.sync_batchnorm)");
+        }));
+    spdlog::info("synchronised BatchNorm: {} layers normalise over all {} ranks' images", layers,
+                 procs_);
   }
   if (comm_) {
     st_ = broadcast_state(*comm_, *model_, *optim_, st_);
@@ -227,8 +241,8 @@ TrainSummary Run::go() {
     set_lr(*optim_, lr);
     // This epoch's samples for this process's ranks (seeded permutation, cycled if shorter).
     auto draw = sampler.draw(epoch, st_.iteration, tc_.iters_per_epoch, ranks_);
-    data::Prefetcher loader(train_set_, std::move(draw.order), std::move(draw.seeds), config_.data.workers,
-                            config_.data.prefetch);
+    data::Prefetcher loader(train_set_, std::move(draw.order), std::move(draw.seeds),
+                            config_.data.workers, config_.data.prefetch);
 
     for (int it = st_.iteration; it < tc_.iters_per_epoch && st_.step < stop_step_; ++it) {
       const auto t0 = std::chrono::steady_clock::now();
@@ -242,32 +256,37 @@ TrainSummary Run::go() {
       ++st_.step;
       st_.iteration = it + 1;
       st_.epoch = epoch;
-      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double seconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       record_step(stats, seconds, lr, epoch, loader);
       if (out_of_time()) {
         spdlog::info("time budget of {} minutes reached at step {}", tc_.max_minutes, st_.step);
-        on_lead([&] {
-          checkpoint(false);
-          plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
-        }, "the time-budget checkpoint");
+        on_lead(
+            [&] {
+              checkpoint(false);
+              plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
+            },
+            "the time-budget checkpoint");
         finish(epoch);
         return summary_;
       }
     }
     if (st_.iteration == tc_.iters_per_epoch) end_of_epoch(epoch);
   }
-  on_lead([&] {
-    progress_->finish();
-    checkpoint(false);
-    plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
-  }, "the final checkpoint");
+  on_lead(
+      [&] {
+        progress_->finish();
+        checkpoint(false);
+        plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
+      },
+      "the final checkpoint");
   finish(st_.epoch);
   return summary_;
 }
 
 // The step's figures into the log window, and a metrics line when one is due.
 void Run::record_step(const StepStats& stats, double seconds, double lr, int epoch,
-                         const data::Prefetcher& loader) {
+                      const data::Prefetcher& loader) {
   const double loss_value = stats.loss / world_;
   window_.loss += loss_value, window_.psnr += stats.psnr / world_, window_.seconds += seconds;
   window_.rays += int64_t(stats.rays), ++window_.steps;
@@ -281,18 +300,25 @@ void Run::record_step(const StepStats& stats, double seconds, double lr, int epo
 void Run::log_step(const StepStats& stats, double lr, int epoch, const data::Prefetcher& loader) {
   const auto& w = window_;
   pipeline::JsonLine line;
-  line.add("step", st_.step).add("epoch", epoch).add("lr", lr).add("loss", w.loss / w.steps)
+  line.add("step", st_.step)
+      .add("epoch", epoch)
+      .add("lr", lr)
+      .add("loss", w.loss / w.steps)
       .add("mse", stats.mse / world_)
       .add("lpips", lpips_ ? stats.lpips / world_ : NAN)
-      .add("psnr", w.psnr / w.steps).add("time_per_step", w.seconds / w.steps)
+      .add("psnr", w.psnr / w.steps)
+      .add("time_per_step", w.seconds / w.steps)
       .add("rays_per_second", w.rays / w.seconds)
       .add("loader_wait", loader.wait_seconds())
-      .add("world_size", procs_).add("global_batch", world_)
-      .add("elapsed_s", std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count());
+      .add("world_size", procs_)
+      .add("global_batch", world_)
+      .add("elapsed_s",
+           std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count());
   if (comm_) line.add("allreduce_seconds", w.allreduce / w.steps);
   metrics_log_->write(line);
   char note[96];
-  std::snprintf(note, sizeof note, "epoch %d loss %.4f psnr %.2f", epoch, w.loss / w.steps, w.psnr / w.steps);
+  std::snprintf(note, sizeof note, "epoch %d loss %.4f psnr %.2f", epoch, w.loss / w.steps,
+                w.psnr / w.steps);
   progress_->advance(w.steps, note);
 }
 
@@ -314,14 +340,16 @@ void Run::end_of_epoch(int epoch) {
   const bool last = st_.epoch == tc_.epochs;
   const auto due = [&](int every) { return last || (every > 0 && st_.epoch % every == 0); };
   if (!due(tc_.save_every_epochs) && !((val_set_ || comm_) && due(tc_.val_every_epochs))) return;
-  on_lead([&] {
-    if (due(tc_.save_every_epochs)) checkpoint(true);
-    if (val_set_ && due(tc_.val_every_epochs)) {
-      summary_.last_val_psnr = validate(*model_, config_, *val_set_, *tokens_, canonical_, device_, val_dir_,
-                                        st_.epoch, *metrics_log_, st_.step);
-      plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
-    }
-  }, "the checkpoint and validation of epoch " + std::to_string(st_.epoch));
+  on_lead(
+      [&] {
+        if (due(tc_.save_every_epochs)) checkpoint(true);
+        if (val_set_ && due(tc_.val_every_epochs)) {
+          summary_.last_val_psnr = validate(*model_, config_, *val_set_, *tokens_, canonical_,
+                                            device_, val_dir_, st_.epoch, *metrics_log_, st_.step);
+          plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
+        }
+      },
+      "the checkpoint and validation of epoch " + std::to_string(st_.epoch));
 }
 
 void Run::checkpoint(bool keep_epoch_copy) {
@@ -338,8 +366,8 @@ void Run::finish(int epoch) {
   if (!options_.rank_state_dir.empty()) {
     fs::create_directories(options_.rank_state_dir);
     for (int r : ranks_)  // one file per rank this process played (identical for virtual ranks)
-      pipeline::save_checkpoint(options_.rank_state_dir / ("rank" + std::to_string(r) + ".pt"), *model_,
-                                *optim_, st_);
+      pipeline::save_checkpoint(options_.rank_state_dir / ("rank" + std::to_string(r) + ".pt"),
+                                *model_, *optim_, st_);
   }
   if (comm_) comm_->barrier("the end of training");
   summary_.steps = st_.step;

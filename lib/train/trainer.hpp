@@ -37,10 +37,10 @@ struct TrainOptions {
 };
 
 struct TrainSummary {
-  int64_t steps = 0;              // global steps done at the end (including resumed ones)
-  int epoch = 0;                  // epoch reached
+  int64_t steps = 0;  // global steps done at the end (including resumed ones)
+  int epoch = 0;      // epoch reached
   double last_loss = 0;
-  double last_val_psnr = 0;       // 0 when no validation ran
+  double last_val_psnr = 0;          // 0 when no validation ran
   std::filesystem::path checkpoint;  // the latest checkpoint written
 };
 

@@ -9,8 +9,9 @@
 namespace th::train {
 
 double validate(model::TransHumanImpl& model, const Config& config, const data::Dataset& val_set,
-                pipeline::Tokens& tokens, const torch::Tensor& canonical, const torch::Device& device,
-                const std::filesystem::path& dir, int epoch, pipeline::JsonlWriter& log, int64_t step) {
+                pipeline::Tokens& tokens, const torch::Tensor& canonical,
+                const torch::Device& device, const std::filesystem::path& dir, int epoch,
+                pipeline::JsonlWriter& log, int64_t step) {
   const size_t n = std::min<size_t>(size_t(config.train.val_views), val_set.size());
   if (n == 0) return 0.0;
   model.eval();
@@ -19,7 +20,8 @@ double validate(model::TransHumanImpl& model, const Config& config, const data::
     const size_t index = k * val_set.size() / n;  // spread over the split
     const data::Sample s = val_set.load(index, 0);
     const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
-    const pipeline::ViewResult r = pipeline::evaluate_view(model, config.render, s, inputs, nullptr, device);
+    const pipeline::ViewResult r =
+        pipeline::evaluate_view(model, config.render, s, inputs, nullptr, device);
     psnr_sum += r.psnr;
     acc_max = std::max(acc_max, r.acc_max);
     char name[48];
@@ -30,17 +32,21 @@ double validate(model::TransHumanImpl& model, const Config& config, const data::
   }
   model.train();
   const double psnr = psnr_sum / double(n);
-  log.write(pipeline::JsonLine().add("step", step).add("epoch", epoch).add("val_psnr", psnr)
+  log.write(pipeline::JsonLine()
+                .add("step", step)
+                .add("epoch", epoch)
+                .add("val_psnr", psnr)
                 .add("val_acc_max", acc_max));
-  spdlog::info("validation after epoch {}: PSNR {:.2f} dB over {} views (images in {})", epoch, psnr, n,
-               dir.string());
+  spdlog::info("validation after epoch {}: PSNR {:.2f} dB over {} views (images in {})", epoch,
+               psnr, n, dir.string());
   if (acc_max < 0.05)
-    spdlog::warn("validation renders are empty (accumulated opacity <= {:.3f} everywhere): the model "
-                 "has collapsed to an empty field. Try: a lower train.lr or a longer warm-up "
-                 "(train.warmup_epochs), check that the masks and the SMPL fits line up with the "
-                 "images (transhuman-synth's contact sheet / the data checks), and that "
-                 "data.ratio and the cameras agree.",
-                 acc_max);
+    spdlog::warn(
+        "validation renders are empty (accumulated opacity <= {:.3f} everywhere): the model "
+        "has collapsed to an empty field. Try: a lower train.lr or a longer warm-up "
+        "(train.warmup_epochs), check that the masks and the SMPL fits line up with the "
+        "images (transhuman-synth's contact sheet / the data checks), and that "
+        "data.ratio and the cameras agree.",
+        acc_max);
   return psnr;
 }
 

@@ -14,7 +14,8 @@ namespace th::train {
 
 // Returns the mean PSNR of the rendered views; writes <dir>/epoch_<e>_<k>.png panels.
 double validate(model::TransHumanImpl& model, const Config& config, const data::Dataset& val_set,
-                pipeline::Tokens& tokens, const torch::Tensor& canonical, const torch::Device& device,
-                const std::filesystem::path& dir, int epoch, pipeline::JsonlWriter& log, int64_t step);
+                pipeline::Tokens& tokens, const torch::Tensor& canonical,
+                const torch::Device& device, const std::filesystem::path& dir, int epoch,
+                pipeline::JsonlWriter& log, int64_t step);
 
 }  // namespace th::train

@@ -140,7 +140,8 @@ CameraPath read_camera_path(const std::filesystem::path& path) {
   // Bounded before parsing: about 300 bytes per camera, so 32 MiB is some 100,000 cameras.
   constexpr uintmax_t kMaxBytes = uintmax_t{32} << 20;
   if (const auto bytes = std::filesystem::file_size(path); bytes > kMaxBytes)
-    fail("camera path file '", name, "' is ", bytes, " bytes, more than a camera path may be (", kMaxBytes, ")");
+    fail("camera path file '", name, "' is ", bytes, " bytes, more than a camera path may be (",
+         kMaxBytes, ")");
   YAML::Node root;
   try {
     root = YAML::LoadFile(name);
@@ -165,7 +166,8 @@ CameraPath read_camera_path(const std::filesystem::path& path) {
     fail("camera path file '", name, "': 'cameras' must be a non-empty list");
   constexpr size_t kMaxCameras = 108000;  // inference::kMaxVideoFrames: an hour at 30 fps
   if (cams.size() > kMaxCameras)
-    fail("camera path file '", name, "': ", cams.size(), " cameras, more than a video may have (", kMaxCameras, ")");
+    fail("camera path file '", name, "': ", cams.size(), " cameras, more than a video may have (",
+         kMaxCameras, ")");
   for (size_t i = 0; i < cams.size(); ++i) {
     const std::string where = "camera path file '" + name + "': cameras[" + std::to_string(i) + "]";
     if (!cams[i].IsMap()) fail(where, " must be a map with K, R, T");

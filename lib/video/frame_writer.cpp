@@ -51,7 +51,8 @@ cv::Mat to_bgr8(const torch::Tensor& rgb) {
 std::string encode_png(const cv::Mat& image, const std::string& what) {
   std::vector<uchar> bytes;
   if (image.empty() || !cv::imencode(".png", image, bytes))
-    fail("cannot encode ", what, " as PNG (", image.cols, "x", image.rows, ", type ", image.type(), ")");
+    fail("cannot encode ", what, " as PNG (", image.cols, "x", image.rows, ", type ", image.type(),
+         ")");
   return std::string(reinterpret_cast<const char*>(bytes.data()), bytes.size());
 }
 
@@ -117,7 +118,8 @@ VideoResult FrameWriter::write_video(int n) const {
   cv::VideoWriter writer;
   {
     QuietOpenCV quiet;
-    writer.open(tmp.string(), cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]), options_.fps, first.size(), true);
+    writer.open(tmp.string(), cv::VideoWriter::fourcc(f[0], f[1], f[2], f[3]), options_.fps,
+                first.size(), true);
   }
   const std::string fallback =
       "; the " + std::to_string(n) + " frames are PNG files in '" + options_.dir.string() + "'";

@@ -1,15 +1,10 @@
 #include "viewer/server.hpp"
 
+#include <arpa/inet.h>
 #include <httplib.h>
-#include <nlohmann/json.hpp>
+#include <netinet/in.h>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
-
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
-
-#include <arpa/inet.h>
-#include <netinet/in.h>
 
 #include <atomic>
 #include <chrono>
@@ -18,6 +13,9 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <optional>
 #include <sstream>
 
@@ -63,9 +61,11 @@ int int_param(const httplib::Request& req, const std::string& name, int lo, int 
   } catch (const std::exception&) {
     used = 0;
   }
-  if (text.empty() || used != text.size()) throw BadRequest{"'" + name + "' = '" + text + "' is not an integer"};
+  if (text.empty() || used != text.size())
+    throw BadRequest{"'" + name + "' = '" + text + "' is not an integer"};
   if (v < lo || v > hi)
-    throw BadRequest{"'" + name + "' = " + text + " must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"};
+    throw BadRequest{"'" + name + "' = " + text + " must be in [" + std::to_string(lo) + ", " +
+                     std::to_string(hi) + "]"};
   return int(v);
 }
 
@@ -87,17 +87,19 @@ torch::Tensor vec3(const httplib::Request& req, const std::string& name, double 
   std::vector<double> v;
   std::stringstream ss(text);
   for (std::string part; std::getline(ss, part, ',');) v.push_back(number(name, part));
-  if (v.size() != 3) throw BadRequest{"'" + name + "' = '" + text + "' must be three numbers x,y,z"};
+  if (v.size() != 3)
+    throw BadRequest{"'" + name + "' = '" + text + "' must be three numbers x,y,z"};
   for (double x : v)
-    if (std::abs(x) > max_abs) throw BadRequest{"'" + name + "' = '" + text + "' is farther than " +
-                                                std::to_string(int(max_abs)) + " from the origin"};
+    if (std::abs(x) > max_abs)
+      throw BadRequest{"'" + name + "' = '" + text + "' is farther than " +
+                       std::to_string(int(max_abs)) + " from the origin"};
   return torch::tensor(v, torch::kFloat64);
 }
 
 // The pinhole camera at `eye` looking along `forward` with `up` roughly up, vertical field of
 // view `fovy` degrees, for a width x height image: OpenCV axes (x right, y down, z forward).
-th::video::PathCamera look_camera(const torch::Tensor& eye, const torch::Tensor& forward, const torch::Tensor& up,
-                                  double fovy, int width, int height) {
+th::video::PathCamera look_camera(const torch::Tensor& eye, const torch::Tensor& forward,
+                                  const torch::Tensor& up, double fovy, int width, int height) {
   if (forward.norm().item<double>() < 1e-9) throw BadRequest{"'forward' must not be zero"};
   const auto f = forward / forward.norm();
   auto right = torch::cross(f, up, 0);
@@ -109,7 +111,8 @@ th::video::PathCamera look_camera(const torch::Tensor& eye, const torch::Tensor&
   const auto T = -torch::mv(R, eye).reshape({3, 1});
   const double focal = 0.5 * height / std::tan(0.5 * fovy * M_PI / 180.0);
   const auto K = torch::tensor({focal, 0.0, 0.5 * width, 0.0, focal, 0.5 * height, 0.0, 0.0, 1.0},
-                               torch::kFloat64).reshape({3, 3});
+                               torch::kFloat64)
+                     .reshape({3, 3});
   return {K, R, T};
 }
 
@@ -133,8 +136,10 @@ std::string png(const torch::Tensor& image) {
   const int h = int(u8.size(0)), w = int(u8.size(1)), c = u8.dim() == 3 ? 3 : 1;
   cv::Mat m(h, w, c == 3 ? CV_8UC3 : CV_8UC1, u8.data_ptr<uint8_t>());
   cv::Mat out;
-  if (c == 3) cv::cvtColor(m, out, cv::COLOR_RGB2BGR);
-  else out = m;
+  if (c == 3)
+    cv::cvtColor(m, out, cv::COLOR_RGB2BGR);
+  else
+    out = m;
   std::vector<uchar> bytes;
   cv::imencode(".png", out, bytes);
   return std::string(bytes.begin(), bytes.end());
@@ -227,7 +232,9 @@ class Viewer {
   std::string render(const httplib::Request& req, const std::function<bool()>& client_gone) {
     const auto [h, f] = person_frame(req);
     // camera=C: dataset camera C exactly (K, R, T and image size), as transhuman-render --camera.
-    const int snap = req.has_param("camera") ? int_param(req, "camera", 0, session_.human(h).num_cameras() - 1) : -1;
+    const int snap = req.has_param("camera")
+                         ? int_param(req, "camera", 0, session_.human(h).num_cameras() - 1)
+                         : -1;
     const int width = snap >= 0 ? 0 : int_param(req, "width", 8, options_.max_size);
     const int height = snap >= 0 ? 0 : int_param(req, "height", 8, options_.max_size);
     const int samples = req.has_param("samples") ? int_param(req, "samples", 2, kMaxSamples) : 0;
@@ -237,8 +244,10 @@ class Viewer {
     th::video::PathCamera camera;
     if (snap < 0) {
       const double fovy = number("fovy", param(req, "fovy"));
-      if (!(fovy >= 1 && fovy <= 170)) throw BadRequest{"'fovy' = " + param(req, "fovy") + " must be in [1, 170] degrees"};
-      camera = look_camera(vec3(req, "eye", 1e4), vec3(req, "forward", 1e4), vec3(req, "up", 1e4), fovy, width, height);
+      if (!(fovy >= 1 && fovy <= 170))
+        throw BadRequest{"'fovy' = " + param(req, "fovy") + " must be in [1, 170] degrees"};
+      camera = look_camera(vec3(req, "eye", 1e4), vec3(req, "forward", 1e4), vec3(req, "up", 1e4),
+                           fovy, width, height);
     }
     // Each page (client=ID) numbers its requests; a newer one cancels that page's older ones.
     const std::string client = req.has_param("client") ? req.get_param_value("client") : "";
@@ -250,11 +259,13 @@ class Viewer {
       uint64_t& latest = latest_[client];
       latest = std::max(latest, seq);
     }
-    const Interruption interrupted = [this, client, seq, &client_gone]() -> std::optional<HttpError> {
+    const Interruption interrupted = [this, client, seq,
+                                      &client_gone]() -> std::optional<HttpError> {
       if (auto e = stopped_or_gone(client_gone)) return e;
       std::lock_guard<std::mutex> lock(latest_mutex_);
       const auto it = latest_.find(client);
-      if (it != latest_.end() && seq < it->second) return HttpError{409, "cancelled by a newer request"};
+      if (it != latest_.end() && seq < it->second)
+        return HttpError{409, "cancelled by a newer request"};
       return std::nullopt;
     };
     const auto lock = render_lock(interrupted);
@@ -275,10 +286,11 @@ class Viewer {
     control.cancelled = [&] {
       stopped = interrupted();
       if (!stopped && Clock::now() - started > std::chrono::seconds(options_.render_timeout_s))
-        stopped = HttpError{503, "the render ran past the viewer's bound of " +
-                                     std::to_string(options_.render_timeout_s) +
-                                     " s per render (--render-timeout) and was stopped: ask for fewer samples "
-                                     "or a smaller image"};
+        stopped = HttpError{
+            503, "the render ran past the viewer's bound of " +
+                     std::to_string(options_.render_timeout_s) +
+                     " s per render (--render-timeout) and was stopped: ask for fewer samples "
+                     "or a smaller image"};
       return bool(stopped);
     };
     const auto images = session_.render_view(*prepared, camera, w, hh, control);
@@ -293,7 +305,8 @@ class Viewer {
     if (valid.any().item<bool>()) {
       const auto d = depth.index({valid});
       const double lo = d.min().item<double>(), hi = d.max().item<double>();
-      depth = torch::where(valid, 1.0 - (depth - lo) / std::max(hi - lo, 1e-6) * 0.8, torch::zeros_like(depth));
+      depth = torch::where(valid, 1.0 - (depth - lo) / std::max(hi - lo, 1e-6) * 0.8,
+                           torch::zeros_like(depth));
     }
     return png(depth);
   }
@@ -323,8 +336,9 @@ class Viewer {
     while (!lock.try_lock_for(std::chrono::milliseconds(50))) {
       if (auto e = interrupted()) throw *e;
       if (Clock::now() > until)
-        throw HttpError{503, "busy: another request has had the renderer for " +
-                                 std::to_string(options_.render_timeout_s + 5) + " s",
+        throw HttpError{503,
+                        "busy: another request has had the renderer for " +
+                            std::to_string(options_.render_timeout_s + 5) + " s",
                         2};
     }
     if (auto e = interrupted()) throw *e;
@@ -355,7 +369,11 @@ class Viewer {
     auto it = prepared_.find(key);
     if (it == prepared_.end()) {
       if (prepared_.size() >= 4) prepared_.erase(prepared_.begin());
-      it = prepared_.emplace(key, std::make_shared<const PreparedFrame>(session_.prepare(h, f, options_.view))).first;
+      it =
+          prepared_
+              .emplace(key,
+                       std::make_shared<const PreparedFrame>(session_.prepare(h, f, options_.view)))
+              .first;
     }
     return it->second;
   }
@@ -363,8 +381,9 @@ class Viewer {
   const Session& session_;
   const Options options_;
   const std::atomic<bool>& stopping_;
-  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> prepared_;  // with render_mutex_
-  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> data_;      // with frames_mutex_
+  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>>
+      prepared_;                                                              // with render_mutex_
+  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> data_;  // with frames_mutex_
   std::mutex frames_mutex_;
   std::timed_mutex render_mutex_;
   std::map<std::string, uint64_t> latest_;  // per client: the newest request seen
@@ -380,7 +399,6 @@ std::string read_file(const fs::path& path) {
 
 }  // namespace
 
-
 struct Server::Impl {
   Impl(const Session& session, const Options& o) : options(o), viewer(session, o, stopping) {}
   Options options;
@@ -390,90 +408,102 @@ struct Server::Impl {
   std::unique_ptr<Access> access;  // once bound
 };
 
-Server::Server(const Session& session, const Options& options) : impl_(std::make_unique<Impl>(session, options)) {
+Server::Server(const Session& session, const Options& options)
+    : impl_(std::make_unique<Impl>(session, options)) {
   Listener& server = impl_->server;
   Viewer& viewer = impl_->viewer;
   const fs::path three = th::report::find_three_js();
   const auto answer = [](httplib::Response& res, int status, const std::string& message) {
     res.status = status;
     res.set_header("Cache-Control", "no-store");
-    res.set_content(message.empty() || message.back() != '\n' ? message + "\n" : message, "text/plain; charset=utf-8");
+    res.set_content(message.empty() || message.back() != '\n' ? message + "\n" : message,
+                    "text/plain; charset=utf-8");
   };
-  const auto guarded = [answer](const std::function<void(const httplib::Request&, httplib::Response&)>& fn) {
-    return [fn, answer](const httplib::Request& req, httplib::Response& res) {
-      try {
-        fn(req, res);
-      } catch (const HttpError& e) {
-        answer(res, e.status, e.message);
-        if (e.retry_after_s > 0) res.set_header("Retry-After", std::to_string(e.retry_after_s));
-      } catch (const th::Error& e) {
-        answer(res, 400, e.what());
-      } catch (const std::exception& e) {
-        spdlog::error("viewer: {}", e.what());
-        answer(res, 500, std::string("internal error: ") + e.what());
-      }
-    };
-  };
+  const auto guarded =
+      [answer](const std::function<void(const httplib::Request&, httplib::Response&)>& fn) {
+        return [fn, answer](const httplib::Request& req, httplib::Response& res) {
+          try {
+            fn(req, res);
+          } catch (const HttpError& e) {
+            answer(res, e.status, e.message);
+            if (e.retry_after_s > 0) res.set_header("Retry-After", std::to_string(e.retry_after_s));
+          } catch (const th::Error& e) {
+            answer(res, 400, e.what());
+          } catch (const std::exception& e) {
+            spdlog::error("viewer: {}", e.what());
+            answer(res, 500, std::string("internal error: ") + e.what());
+          }
+        };
+      };
   // Who is answered at all (viewer/access.hpp), before any route and before a body is read.
-  server.set_pre_routing_handler([this, answer](const httplib::Request& req, httplib::Response& res) {
-    const auto refusal = impl_->access->check(req);
-    if (!refusal) return httplib::Server::HandlerResponse::Unhandled;
-    Listener::close_after_response();
-    answer(res, refusal->status, refusal->message);
-    if (refusal->status == 405) res.set_header("Allow", "GET, HEAD");
-    return httplib::Server::HandlerResponse::Handled;
-  });
+  server.set_pre_routing_handler(
+      [this, answer](const httplib::Request& req, httplib::Response& res) {
+        const auto refusal = impl_->access->check(req);
+        if (!refusal) return httplib::Server::HandlerResponse::Unhandled;
+        Listener::close_after_response();
+        answer(res, refusal->status, refusal->message);
+        if (refusal->status == 405) res.set_header("Allow", "GET, HEAD");
+        return httplib::Server::HandlerResponse::Handled;
+      });
   // "Expect: 100-continue" is answered before routing: refused uploads are refused there too.
-  server.set_expect_100_continue_handler([this, answer](const httplib::Request& req, httplib::Response& res) {
-    const auto refusal = impl_->access->check(req);
-    if (!refusal) return 100;
-    Listener::close_after_response();
-    answer(res, refusal->status, refusal->message);
-    return refusal->status;
-  });
+  server.set_expect_100_continue_handler(
+      [this, answer](const httplib::Request& req, httplib::Response& res) {
+        const auto refusal = impl_->access->check(req);
+        if (!refusal) return 100;
+        Listener::close_after_response();
+        answer(res, refusal->status, refusal->message);
+        return refusal->status;
+      });
   server.Get("/", guarded([](const httplib::Request&, httplib::Response& res) {
-    res.set_header("X-Frame-Options", "DENY");
-    res.set_header("Content-Security-Policy", "frame-ancestors 'none'");
-    res.set_content(kPage, "text/html; charset=utf-8");
-  }));
+               res.set_header("X-Frame-Options", "DENY");
+               res.set_header("Content-Security-Policy", "frame-ancestors 'none'");
+               res.set_content(kPage, "text/html; charset=utf-8");
+             }));
   for (const char* name : {"three.min.js", "OrbitControls.js"}) {
     const std::string file = name;
-    server.Get("/three/" + file, guarded([three, file](const httplib::Request&, httplib::Response& res) {
-      const fs::path path = file == "three.min.js" ? three / "build" / file
-                                                   : three / "examples" / "js" / "controls" / file;
-      if (three.empty() || !fs::is_regular_file(path)) {
-        res.status = 404;
-        res.set_content("three.js not found (Debian: apt-get install libjs-three)\n", "text/plain");
-        return;
-      }
-      res.set_content(read_file(path), "application/javascript");
-    }));
+    server.Get("/three/" + file,
+               guarded([three, file](const httplib::Request&, httplib::Response& res) {
+                 const fs::path path = file == "three.min.js"
+                                           ? three / "build" / file
+                                           : three / "examples" / "js" / "controls" / file;
+                 if (three.empty() || !fs::is_regular_file(path)) {
+                   res.status = 404;
+                   res.set_content("three.js not found (Debian: apt-get install libjs-three)\n",
+                                   "text/plain");
+                   return;
+                 }
+                 res.set_content(read_file(path), "application/javascript");
+               }));
   }
   server.Get("/api/info", guarded([&viewer](const httplib::Request&, httplib::Response& res) {
-    res.set_content(viewer.info(), "application/json");
-  }));
+               res.set_content(viewer.info(), "application/json");
+             }));
   server.Get("/api/frame", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-    res.set_content(viewer.frame_json(req), "application/json");
-  }));
-  server.Get("/api/reference", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-    res.set_content(viewer.reference(req), "image/png");
-  }));
-  server.Get("/api/evaluate", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-    res.set_content(viewer.evaluate(req, Listener::client_gone), "application/json");
-  }));
-  server.Get("/api/ground_truth", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-    res.set_content(viewer.ground_truth(req), "image/png");
-  }));
+               res.set_content(viewer.frame_json(req), "application/json");
+             }));
+  server.Get("/api/reference",
+             guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+               res.set_content(viewer.reference(req), "image/png");
+             }));
+  server.Get("/api/evaluate",
+             guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+               res.set_content(viewer.evaluate(req, Listener::client_gone), "application/json");
+             }));
+  server.Get("/api/ground_truth",
+             guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+               res.set_content(viewer.ground_truth(req), "image/png");
+             }));
   server.Get("/api/render", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-    const auto image = viewer.render(req, Listener::client_gone);
-    res.set_header("Cache-Control", "no-store");
-    res.set_content(image, "image/png");
-  }));
+               const auto image = viewer.render(req, Listener::client_gone);
+               res.set_header("Cache-Control", "no-store");
+               res.set_content(image, "image/png");
+             }));
 
   // An empty --host means every interface, as it does for most servers (getaddrinfo would
   // take it for loopback).
   server.bind(options.host.empty() ? "0.0.0.0" : options.host, options.port);
-  impl_->access = std::make_unique<Access>(options.host, server.bound_address(), options.port, options.allow_hosts);
+  impl_->access = std::make_unique<Access>(options.host, server.bound_address(), options.port,
+                                           options.allow_hosts);
   if (interfaces().find("only") == std::string::npos)
     spdlog::warn("LISTENING ON {}: anyone who can reach it can use the viewer", interfaces());
 }
@@ -483,13 +513,17 @@ Server::~Server() = default;
 namespace {
 
 bool is_loopback(const sockaddr_storage& a) {
-  if (a.ss_family == AF_INET) return (ntohl(reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr) >> 24) == 127;
-  return a.ss_family == AF_INET6 && IN6_IS_ADDR_LOOPBACK(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
+  if (a.ss_family == AF_INET)
+    return (ntohl(reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr) >> 24) == 127;
+  return a.ss_family == AF_INET6 &&
+         IN6_IS_ADDR_LOOPBACK(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
 }
 
 bool is_any(const sockaddr_storage& a) {
-  if (a.ss_family == AF_INET) return reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr == htonl(INADDR_ANY);
-  return a.ss_family == AF_INET6 && IN6_IS_ADDR_UNSPECIFIED(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
+  if (a.ss_family == AF_INET)
+    return reinterpret_cast<const sockaddr_in&>(a).sin_addr.s_addr == htonl(INADDR_ANY);
+  return a.ss_family == AF_INET6 &&
+         IN6_IS_ADDR_UNSPECIFIED(&reinterpret_cast<const sockaddr_in6&>(a).sin6_addr);
 }
 
 }  // namespace
@@ -501,9 +535,12 @@ std::string Server::url() const {
   const bool literal = host.empty() || ::inet_pton(AF_INET, host.c_str(), &scratch) == 1 ||
                        ::inet_pton(AF_INET6, host.c_str(), &scratch) == 1;
   std::string name;
-  if (is_any(bound)) name = impl_->server.ipv6_only() ? "[::1]" : "127.0.0.1";
-  else if (literal) name = url_host(numeric_address(bound));
-  else name = host;
+  if (is_any(bound))
+    name = impl_->server.ipv6_only() ? "[::1]" : "127.0.0.1";
+  else if (literal)
+    name = url_host(numeric_address(bound));
+  else
+    name = host;
   return "http://" + name + ":" + std::to_string(impl_->options.port) + "/";
 }
 
@@ -511,7 +548,7 @@ std::string Server::interfaces() const {
   const auto bound = impl_->server.bound_address();
   const std::string address = url_host(numeric_address(bound));
   if (is_any(bound)) {
-    const char* families = bound.ss_family == AF_INET ? ", IPv4)"
+    const char* families = bound.ss_family == AF_INET  ? ", IPv4)"
                            : impl_->server.ipv6_only() ? ", IPv6)"
                                                        : ", IPv4 and IPv6)";
     return "every interface of this machine (" + address + families;

@@ -7,7 +7,8 @@
 //   GET /api/frame?human=H&frame=F
 //                         the body's centre and every dataset camera as eye/forward/up/fovy (JSON)
 //   GET /api/render?human=H&frame=F&eye=x,y,z&forward=x,y,z&up=x,y,z&fovy=DEG&width=W&height=H
-//                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C instead of
+//                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C instead
+//                   of
 //                         eye..height renders dataset camera C exactly
 //   GET /api/reference?human=H&frame=F&index=I                    reference view I (PNG)
 //   GET /api/evaluate?human=H&frame=F&camera=C   dataset camera C scored as transhuman-eval
@@ -37,12 +38,13 @@ namespace th::viewer {
 struct Options {
   std::string host = "127.0.0.1";  // another address is announced with a warning; "" or "::": all
   int port = 7007;
-  std::vector<std::string> allow_hosts;  // Host names answered beside loopback and the bound address
-  int render_timeout_s = 60;             // longest one render may run
-  int view = 3;          // the dataset camera the first view starts from
-  int max_size = 512;    // largest image side a request may ask for
-  int start_human = 0;   // shown first
-  int start_frame = -1;  // -1: the person's first test frame
+  std::vector<std::string>
+      allow_hosts;            // Host names answered beside loopback and the bound address
+  int render_timeout_s = 60;  // longest one render may run
+  int view = 3;               // the dataset camera the first view starts from
+  int max_size = 512;         // largest image side a request may ask for
+  int start_human = 0;        // shown first
+  int start_frame = -1;       // -1: the person's first test frame
 };
 
 // `name` as the Host header carries it (lower case, IPv6 in brackets); throws th::Error unless

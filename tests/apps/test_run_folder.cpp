@@ -1,11 +1,10 @@
 // The run folder of every executable: what --force may remove, which folders render and mesh
 // continue in, and the lock that keeps a second writer out.
-#include <catch2/catch.hpp>
-#include <yaml-cpp/yaml.h>
-
 #include <sys/wait.h>
 #include <unistd.h>
+#include <yaml-cpp/yaml.h>
 
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <fstream>
 #include <functional>
@@ -37,14 +36,16 @@ std::string error_of(const std::function<void()>& f) {
 
 }  // namespace
 
-TEST_CASE("clearing with --force never removes a folder holding an input or lying inside one", "[app][run-folder]") {
+TEST_CASE("clearing with --force never removes a folder holding an input or lying inside one",
+          "[app][run-folder]") {
   const fs::path root = th::test::scratch_dir("run_folder_inputs");
   touch(root / "run" / "checkpoints" / "latest.pt");
   touch(root / "run" / "metrics.jsonl");
   touch(root / "data" / "p" / "annots.npy");
   const YAML::Node none;
-  const th::app::Inputs inputs{{"the checkpoint (--checkpoint)", (root / "run" / "checkpoints" / "latest.pt").string()},
-                               {"the data root (data.root)", (root / "data").string()}};
+  const th::app::Inputs inputs{
+      {"the checkpoint (--checkpoint)", (root / "run" / "checkpoints" / "latest.pt").string()},
+      {"the data root (data.root)", (root / "data").string()}};
   CHECK_THAT(error_of([&] { claim_run_dir(root / "run", none, true, false, inputs); }),
              Catch::Contains("--force would delete the checkpoint (--checkpoint) '" +
                              (root / "run" / "checkpoints" / "latest.pt").string() + "'"));
@@ -54,8 +55,9 @@ TEST_CASE("clearing with --force never removes a folder holding an input or lyin
   fs::create_directory_symlink(root / "run", root / "link");
   CHECK_THAT(error_of([&] { claim_run_dir(root / "link", none, true, false, inputs); }),
              Catch::Contains("--force would delete the checkpoint"));
-  CHECK_THAT(error_of([&] { claim_run_dir(root / "data" / ".." / "run", none, true, false, inputs); }),
-             Catch::Contains("--force would delete the checkpoint"));
+  CHECK_THAT(
+      error_of([&] { claim_run_dir(root / "data" / ".." / "run", none, true, false, inputs); }),
+      Catch::Contains("--force would delete the checkpoint"));
   CHECK(fs::exists(root / "run" / "checkpoints" / "latest.pt"));
   CHECK(fs::exists(root / "data" / "p" / "annots.npy"));
   // A folder holding none of them is cleared, its lock file kept.
@@ -79,15 +81,17 @@ TEST_CASE("render and mesh continue in a folder of their own outputs and refuse 
   CHECK(fs::exists(root / "mine" / "frames" / "frame_0000.png"));  // continued, not cleared
   touch(root / "run" / "config.yaml");
   touch(root / "run" / "checkpoints" / "latest.pt");
-  CHECK_THAT(error_of([&] { claim_run_dir(root / "run", none, false, false, {}, own); }),
-             Catch::Contains("already holds 1 entry (checkpoints) that this command does not write"));
+  CHECK_THAT(
+      error_of([&] { claim_run_dir(root / "run", none, false, false, {}, own); }),
+      Catch::Contains("already holds 1 entry (checkpoints) that this command does not write"));
   CHECK(fs::exists(root / "run" / "config.yaml"));
   // Train and eval (no own outputs): any entry but the lock file.
   CHECK_THAT(error_of([&] { claim_run_dir(root / "mine", none, false, false); }),
              Catch::Contains("already holds 3 entries"));
 }
 
-TEST_CASE("a run folder has one writer: a second is refused naming the first, until it ends", "[app][lock]") {
+TEST_CASE("a run folder has one writer: a second is refused naming the first, until it ends",
+          "[app][lock]") {
   const fs::path dir = th::test::scratch_dir("run_folder_lock");
   int ready[2], go[2];
   REQUIRE(::pipe(ready) == 0);

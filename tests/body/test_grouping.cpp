@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <fstream>
 
 #include "body/grouping.hpp"
@@ -16,8 +15,8 @@ torch::Tensor body_like_points(int n, int64_t seed) {
   torch::manual_seed(seed);
   const std::vector<std::array<double, 6>> parts = {
       // centre x, y, z, radii x, y, z
-      {0.0, 0.3, 0.0, 0.17, 0.3, 0.1},   {0.0, 0.8, 0.0, 0.1, 0.12, 0.1},
-      {-0.45, 0.5, 0.0, 0.3, 0.05, 0.05}, {0.45, 0.5, 0.0, 0.3, 0.05, 0.05},
+      {0.0, 0.3, 0.0, 0.17, 0.3, 0.1},      {0.0, 0.8, 0.0, 0.1, 0.12, 0.1},
+      {-0.45, 0.5, 0.0, 0.3, 0.05, 0.05},   {0.45, 0.5, 0.0, 0.3, 0.05, 0.05},
       {-0.1, -0.45, 0.0, 0.07, 0.45, 0.07}, {0.1, -0.45, 0.0, 0.07, 0.45, 0.07}};
   std::vector<torch::Tensor> pts;
   for (const auto& p : parts) {
@@ -56,13 +55,15 @@ TEST_CASE("k-means labels are cached on disk and reused", "[grouping]") {
   const auto pts = body_like_points(1200, 3);
   const auto first = kmeans_cached(pts, 40, 0, dir);
   size_t files = 0;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.path().extension() == ".npy";
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    files += e.path().extension() == ".npy";
   CHECK(files == 1);
   CHECK(torch::equal(kmeans_cached(pts, 40, 0, dir), first));
   // Another body (or k) gets its own entry.
   kmeans_cached(pts * 1.1, 40, 0, dir);
   files = 0;
-  for (const auto& e : std::filesystem::directory_iterator(dir)) files += e.path().extension() == ".npy";
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    files += e.path().extension() == ".npy";
   CHECK(files == 2);
 }
 
@@ -72,9 +73,10 @@ TEST_CASE("k-means clusters are more even in size than grid cells (paper appendi
   const auto grid = cluster_sizes(grid_labels(pts, 300)).to(torch::kFloat64);
   const double km_cv = (km.std() / km.mean()).item<double>();
   const double grid_cv = (grid.std() / grid.mean()).item<double>();
-  std::printf("cluster sizes, coefficient of variation: k-means %.3f (%lld clusters), "
-              "canonical grid %.3f (%lld cells)\n",
-              km_cv, (long long)km.numel(), grid_cv, (long long)grid.numel());
+  std::printf(
+      "cluster sizes, coefficient of variation: k-means %.3f (%lld clusters), "
+      "canonical grid %.3f (%lld cells)\n",
+      km_cv, (long long)km.numel(), grid_cv, (long long)grid.numel());
   CHECK(km_cv < grid_cv);
   CHECK(std::abs(grid.numel() - 300) <= 30);
 }
@@ -95,13 +97,15 @@ TEST_CASE("the grouping kind of the config selects the implementation", "[groupi
   CHECK_FALSE(torch::equal(obs->labels(pts, pts), obs->labels(pts, posed)));
 }
 
-TEST_CASE("the reference's k-means file (numpy-scalar dict keys) loads with numpy's labels", "[grouping][parity]") {
+TEST_CASE("the reference's k-means file (numpy-scalar dict keys) loads with numpy's labels",
+          "[grouping][parity]") {
   // METHOD 2.5: kmeans_dict_300.npy as the reference ships it; np.save of a dict whose
   // dict_voxel2pc_ind is keyed by numpy.int32 scalars (refused as unhashable before).
   const auto dir = th::test::scratch_dir("kmeans_reference_file");
   const int64_t nv = 300, clusters = 24;
-  REQUIRE(th::test::run_python("tests/python/kmeans_reference.py",
-                               dir.string() + " " + std::to_string(nv) + " " + std::to_string(clusters)) == 0);
+  REQUIRE(th::test::run_python(
+              "tests/python/kmeans_reference.py",
+              dir.string() + " " + std::to_string(nv) + " " + std::to_string(clusters)) == 0);
   const auto labels = load_reference_kmeans(dir / "kmeans_dict.npy", nv);
   std::ifstream expected((dir / "labels.txt").string());
   std::vector<int64_t> numpy_labels;
@@ -131,7 +135,8 @@ TEST_CASE("the reference's k-means file (numpy-scalar dict keys) loads with nump
   CHECK(i == groups.size());
 }
 
-TEST_CASE("numpy scalars of every integer, bool and float dtype are plain dict keys", "[grouping][parity]") {
+TEST_CASE("numpy scalars of every integer, bool and float dtype are plain dict keys",
+          "[grouping][parity]") {
   const auto dir = th::test::scratch_dir("numpy_scalar_keys");
   REQUIRE(th::test::run_python("tests/python/kmeans_reference.py", dir.string() + " 30 4") == 0);
   const auto value = th::io::read_npy_value(dir / "scalar_keys.npy");

@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <cmath>
 
 #include "body/visibility.hpp"
@@ -28,7 +27,8 @@ std::pair<torch::Tensor, torch::Tensor> sphere(double radius, int rings, int seg
     for (int s = 0; s < segments; ++s)
       f.insert(f.end(), {ring(r, s), ring(r + 1, s), ring(r + 1, s + 1), ring(r, s),
                          ring(r + 1, s + 1), ring(r, s + 1)});
-  for (int s = 0; s < segments; ++s) f.insert(f.end(), {bottom, ring(rings - 1, s + 1), ring(rings - 1, s)});
+  for (int s = 0; s < segments; ++s)
+    f.insert(f.end(), {bottom, ring(rings - 1, s + 1), ring(rings - 1, s)});
   return {torch::tensor(v, torch::kFloat64).reshape({-1, 3}),
           torch::tensor(f, torch::kInt64).reshape({-1, 3})};
 }
@@ -37,13 +37,15 @@ std::pair<torch::Tensor, torch::Tensor> sphere(double radius, int rings, int seg
 
 TEST_CASE("the near side of a body is visible and the far side is not", "[visibility]") {
   auto [verts, faces] = sphere(0.3, 24, 48);
-  const auto K = torch::tensor({300.0, 0.0, 64.0, 0.0, 300.0, 64.0, 0.0, 0.0, 1.0}, torch::kFloat64).reshape({3, 3});
+  const auto K = torch::tensor({300.0, 0.0, 64.0, 0.0, 300.0, 64.0, 0.0, 0.0, 1.0}, torch::kFloat64)
+                     .reshape({3, 3});
   const auto R = torch::eye(3, torch::kFloat64);
-  const auto T = torch::tensor({0.0, 0.0, 3.0}, torch::kFloat64).reshape({3, 1});  // camera at z = -3
+  const auto T =
+      torch::tensor({0.0, 0.0, 3.0}, torch::kFloat64).reshape({3, 1});  // camera at z = -3
   const auto vis = vertex_visibility(verts, faces, K, R, T, 128, 128);
   const auto z = verts.select(1, 2);
   // Facing the camera (z < 0 side, away from the silhouette) -> visible; far side -> hidden.
-  const auto front = z < -0.1, back = z > 0.1;
+  const auto front = z<-0.1, back = z> 0.1;
   CHECK(vis.index({front}).all().item<bool>());
   CHECK_FALSE(vis.index({back}).any().item<bool>());
   // An occluder: a second sphere behind the first is hidden where the first covers it.
@@ -57,7 +59,8 @@ TEST_CASE("the near side of a body is visible and the far side is not", "[visibi
 
 TEST_CASE("vertices projecting outside the image are invisible", "[visibility]") {
   auto [verts, faces] = sphere(0.3, 12, 24);
-  const auto K = torch::tensor({300.0, 0.0, 64.0, 0.0, 300.0, 64.0, 0.0, 0.0, 1.0}, torch::kFloat64).reshape({3, 3});
+  const auto K = torch::tensor({300.0, 0.0, 64.0, 0.0, 300.0, 64.0, 0.0, 0.0, 1.0}, torch::kFloat64)
+                     .reshape({3, 3});
   const auto R = torch::eye(3, torch::kFloat64);
   const auto T = torch::tensor({5.0, 0.0, 3.0}, torch::kFloat64).reshape({3, 1});  // far off-image
   CHECK_FALSE(vertex_visibility(verts, faces, K, R, T, 128, 128).any().item<bool>());

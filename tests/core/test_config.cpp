@@ -1,6 +1,5 @@
-#include <catch2/catch.hpp>
-
 #include <algorithm>
+#include <catch2/catch.hpp>
 #include <fstream>
 #include <sstream>
 
@@ -19,12 +18,15 @@ fs::path write_file(const fs::path& dir, const std::string& name, const std::str
 }
 
 // Every key path of a YAML map ("a.b.c").
-void collect_keys(const YAML::Node& node, const std::string& prefix, std::vector<std::string>& out) {
+void collect_keys(const YAML::Node& node, const std::string& prefix,
+                  std::vector<std::string>& out) {
   for (const auto& kv : node) {
-    const std::string key = prefix.empty() ? kv.first.as<std::string>()
-                                           : prefix + "." + kv.first.as<std::string>();
-    if (kv.second.IsMap()) collect_keys(kv.second, key, out);
-    else out.push_back(key);
+    const std::string key =
+        prefix.empty() ? kv.first.as<std::string>() : prefix + "." + kv.first.as<std::string>();
+    if (kv.second.IsMap())
+      collect_keys(kv.second, key, out);
+    else
+      out.push_back(key);
   }
 }
 
@@ -54,7 +56,9 @@ TEST_CASE("default.yaml lists every option with the compiled-in defaults", "[con
 
 TEST_CASE("a child config inherits its parent and overrides win over both", "[config]") {
   const fs::path dir = th::test::scratch_dir("config_inherit");
-  write_file(dir, "base.yaml", "train:\n  lr: 0.001\n  epochs: 10\n  warmup_epochs: 1\nmodel:\n  dparf:\n    nk: 3\n");
+  write_file(
+      dir, "base.yaml",
+      "train:\n  lr: 0.001\n  epochs: 10\n  warmup_epochs: 1\nmodel:\n  dparf:\n    nk: 3\n");
   write_file(dir, "child.yaml", "parent: base.yaml\ntrain:\n  epochs: 20\n");
   const Config c = load<Config>(dir / "child.yaml", {"model.dparf.nk=5", "data.ratio=0.25"});
   CHECK(c.train.lr == Approx(0.001));
@@ -66,10 +70,12 @@ TEST_CASE("a child config inherits its parent and overrides win over both", "[co
 
 TEST_CASE("a misspelt key fails naming the key and the likely intended one", "[config]") {
   const fs::path dir = th::test::scratch_dir("config_typo");
-  write_file(dir, "typo.yaml", "train:\n  learning_rat: 0.1\n  lr: 0.1\nmodel:\n  dparf:\n    nkk: 3\n");
+  write_file(dir, "typo.yaml",
+             "train:\n  learning_rat: 0.1\n  lr: 0.1\nmodel:\n  dparf:\n    nkk: 3\n");
   const std::string msg = message_of([&] { load<Config>(dir / "typo.yaml"); });
   CHECK_THAT(msg, Catch::Contains("model.dparf.nkk") || Catch::Contains("train.learning_rat"));
-  const std::string msg2 = message_of([&] { load<Config>("configs/default.yaml", {"model.dparf.nkk=3"}); });
+  const std::string msg2 =
+      message_of([&] { load<Config>("configs/default.yaml", {"model.dparf.nkk=3"}); });
   CHECK_THAT(msg2, Catch::Contains("unknown config key 'model.dparf.nkk'"));
   CHECK_THAT(msg2, Catch::Contains("did you mean 'model.dparf.nk'"));
 }
@@ -106,13 +112,15 @@ TEST_CASE("integers are decimal: a leading zero is not octal, hexadecimal is ref
              Catch::Contains("config key 'eval.limit' must be an integer, got '99999999999'"));
   CHECK(decimal_integer("-12") == -12);
   CHECK(decimal_integer("0") == 0);
-  for (const char* text : {"", "+", "-", "+-1", " 7", "7 ", "1e3", "0x10", "0b1", "1.0", "99999999999999999999"})
+  for (const char* text :
+       {"", "+", "-", "+-1", " 7", "7 ", "1e3", "0x10", "0b1", "1.0", "99999999999999999999"})
     CHECK_FALSE(decimal_integer(text).has_value());
 }
 
 TEST_CASE("incompatible switches are refused with a reason", "[config]") {
   CHECK_THAT(message_of([] {
-               load<Config>("configs/default.yaml", {"model.fdi.appearance=false", "model.fdi.human=false"});
+               load<Config>("configs/default.yaml",
+                            {"model.fdi.appearance=false", "model.fdi.human=false"});
              }),
              Catch::Contains("at least one of the two branches"));
   CHECK_THAT(message_of([] {
@@ -127,14 +135,17 @@ TEST_CASE("missing files and inheritance cycles are reported with the file name"
   const fs::path dir = th::test::scratch_dir("config_cycle");
   write_file(dir, "a.yaml", "parent: b.yaml\n");
   write_file(dir, "b.yaml", "parent: a.yaml\n");
-  CHECK_THAT(message_of([&] { load<Config>(dir / "a.yaml"); }), Catch::Contains("inheritance cycle"));
+  CHECK_THAT(message_of([&] { load<Config>(dir / "a.yaml"); }),
+             Catch::Contains("inheritance cycle"));
   CHECK_THAT(message_of([&] { load<Config>(dir / "nope.yaml"); }),
              Catch::Contains("nope.yaml' does not exist"));
   write_file(dir, "bad.yaml", "train: [1, 2\n");
-  CHECK_THAT(message_of([&] { load<Config>(dir / "bad.yaml"); }), Catch::Contains("YAML error at line"));
+  CHECK_THAT(message_of([&] { load<Config>(dir / "bad.yaml"); }),
+             Catch::Contains("YAML error at line"));
 }
 
-TEST_CASE("keys that are not names and self-referring or exploding aliases are refused", "[config]") {
+TEST_CASE("keys that are not names and self-referring or exploding aliases are refused",
+          "[config]") {
   const fs::path dir = th::test::scratch_dir("config_graph");
   // Found by fuzz/config_fuzz: a YAML::BadConversion escaped, a stack overflow, a hang.
   write_file(dir, "list_key.yaml", "? [a, b]\n: 1\n");
@@ -156,7 +167,8 @@ TEST_CASE("keys that are not names and self-referring or exploding aliases are r
 
 TEST_CASE("the resolved config written to disk loads back to the same values", "[config]") {
   const fs::path dir = th::test::scratch_dir("config_resolved");
-  const Config c = load<Config>("configs/default.yaml", {"train.lr=0.123", "model.fdi.raw_rgb=false"});
+  const Config c =
+      load<Config>("configs/default.yaml", {"train.lr=0.123", "model.fdi.raw_rgb=false"});
   write_yaml(dir / "config.yaml", to_tree(c));
   const Config back = load<Config>(dir / "config.yaml");
   CHECK(YAML::Dump(to_tree(back)) == YAML::Dump(to_tree(c)));
@@ -164,7 +176,8 @@ TEST_CASE("the resolved config written to disk loads back to the same values", "
   CHECK_FALSE(back.model.fdi.raw_rgb);
 }
 
-TEST_CASE("every ablation row loads, validates and changes what its comment says", "[config][ablations]") {
+TEST_CASE("every ablation row loads, validates and changes what its comment says",
+          "[config][ablations]") {
   const YAML::Node full = to_tree(load<Config>("configs/ablations/full.yaml"));
   std::vector<std::string> full_keys;
   collect_keys(full, "", full_keys);
@@ -192,8 +205,10 @@ TEST_CASE("every ablation row loads, validates and changes what its comment says
     own.erase(std::remove(own.begin(), own.end(), "parent"), own.end());
     std::sort(own.begin(), own.end());
     std::sort(changed.begin(), changed.end());
-    if (name == "samples_16") CHECK(changed.empty());  // the demo base renders 16 samples already
-    else CHECK(changed == own);
+    if (name == "samples_16")
+      CHECK(changed.empty());  // the demo base renders 16 samples already
+    else
+      CHECK(changed == own);
     ++rows;
   }
   CHECK(rows >= 18);

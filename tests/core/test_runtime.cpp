@@ -38,7 +38,8 @@ TEST_CASE("device selection follows the request", "[runtime]") {
 
 TEST_CASE("absurd thread counts are refused before any thread is made", "[runtime]") {
   const int before = torch::get_num_threads();
-  CHECK_THROWS_WITH(th::runtime::set_threads(100000), Catch::Contains("threads=100000") && Catch::Contains("per core"));
+  CHECK_THROWS_WITH(th::runtime::set_threads(100000),
+                    Catch::Contains("threads=100000") && Catch::Contains("per core"));
   CHECK(torch::get_num_threads() == before);
 }
 
@@ -50,7 +51,8 @@ TEST_CASE("resource estimates are printed and refused above max_memory_gb", "[ru
   e.threads = 2;
   CHECK_NOTHROW(th::resources::check(e, 4));
   CHECK_THROWS_WITH(th::resources::check(e, 2), Catch::Contains("mesh grid 7145 x 4892 x 19524") &&
-                                                    Catch::Contains("3.0 GiB") && Catch::Contains("max_memory_gb=2"));
+                                                    Catch::Contains("3.0 GiB") &&
+                                                    Catch::Contains("max_memory_gb=2"));
   CHECK_THROWS_WITH(th::resources::check(e, -1), Catch::Contains("max_memory_gb must be >= 0"));
   CHECK(th::resources::memory_limit_bytes(0) > 0);
   CHECK(th::resources::memory_limit_bytes(0) <= double(th::resources::physical_memory_bytes()));

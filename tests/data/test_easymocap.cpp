@@ -1,10 +1,8 @@
 #include <catch2/catch.hpp>
-
-#include <opencv2/core/persistence.hpp>
-#include <opencv2/imgcodecs.hpp>
-
 #include <fstream>
 #include <functional>
+#include <opencv2/core/persistence.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "body/smpl.hpp"
@@ -43,11 +41,14 @@ std::string read_text(const fs::path& file) {
   return ss.str();
 }
 
-void write_text(const fs::path& file, const std::string& text) { std::ofstream(file, std::ios::binary) << text; }
+void write_text(const fs::path& file, const std::string& text) {
+  std::ofstream(file, std::ios::binary) << text;
+}
 
 // Rewrites an intri.yml/extri.yml through OpenCV after `edit` changed its names or matrices.
 using Entries = std::vector<std::pair<std::string, cv::Mat>>;
-void rewrite(const fs::path& file, const std::function<void(std::vector<std::string>&, Entries&)>& edit) {
+void rewrite(const fs::path& file,
+             const std::function<void(std::vector<std::string>&, Entries&)>& edit) {
   std::vector<std::string> names;
   Entries entries;
   {
@@ -74,8 +75,9 @@ cv::Mat& entry(Entries& entries, const std::string& key) {
 }
 
 void erase(Entries& entries, const std::string& key) {
-  entries.erase(std::remove_if(entries.begin(), entries.end(), [&](const auto& e) { return e.first == key; }),
-                entries.end());
+  entries.erase(
+      std::remove_if(entries.begin(), entries.end(), [&](const auto& e) { return e.first == key; }),
+      entries.end());
 }
 
 th::DataConfig capture_config(const fs::path& root) {
@@ -90,11 +92,13 @@ th::DataConfig capture_config(const fs::path& root) {
 
 }  // namespace
 
-TEST_CASE("EasyMocap's layout reads the same cameras, bodies, masks and images as ZJU-MoCap's", "[easymocap]") {
+TEST_CASE("EasyMocap's layout reads the same cameras, bodies, masks and images as ZJU-MoCap's",
+          "[easymocap]") {
   for (const char* person : {"CoreView_s03", "CoreView_313"}) {
     INFO(person);
     const auto zju = ZjuMocapSequence::open(th::test::tiny_dataset() / person);
-    const auto em = open_human(th::test::tiny_easymocap_dataset() / person, {th::DataLayout::automatic, -1, body_model()});
+    const auto em = open_human(th::test::tiny_easymocap_dataset() / person,
+                               {th::DataLayout::automatic, -1, body_model()});
     REQUIRE(std::string(em->layout()) == "easymocap");
     REQUIRE(em->num_cameras() == zju->num_cameras());
     REQUIRE(em->num_frames() == zju->num_frames());
@@ -123,12 +127,15 @@ TEST_CASE("EasyMocap's layout reads the same cameras, bodies, masks and images a
 
 TEST_CASE("the layout of a person's folder is detected and named in the log", "[easymocap]") {
   CHECK(detect_layout(th::test::tiny_dataset() / "CoreView_s03") == th::DataLayout::zju_mocap);
-  CHECK(detect_layout(th::test::tiny_easymocap_dataset() / "CoreView_s03") == th::DataLayout::easymocap);
+  CHECK(detect_layout(th::test::tiny_easymocap_dataset() / "CoreView_s03") ==
+        th::DataLayout::easymocap);
   const fs::path both = capture_copy("easymocap_both");
   fs::copy_file(th::test::tiny_dataset() / "CoreView_s03" / "annots.npy", both / "annots.npy");
-  CHECK_THROWS_WITH(detect_layout(both), Catch::Contains("holds both annots.npy") && Catch::Contains("data.layout"));
+  CHECK_THROWS_WITH(detect_layout(both),
+                    Catch::Contains("holds both annots.npy") && Catch::Contains("data.layout"));
   const fs::path empty = th::test::scratch_dir("easymocap_neither");
-  CHECK_THROWS_WITH(detect_layout(empty), Catch::Contains("holds neither annots.npy") && Catch::Contains("intri.yml"));
+  CHECK_THROWS_WITH(detect_layout(empty),
+                    Catch::Contains("holds neither annots.npy") && Catch::Contains("intri.yml"));
 }
 
 TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[easymocap]") {
@@ -138,38 +145,68 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
     std::string message;
   };
   const std::vector<Case> cases{
-      {"intri.yml missing", [](const fs::path& d) { fs::remove(d / "intri.yml"); }, "intri.yml' is missing"},
-      {"intri.yml not YAML", [](const fs::path& d) { write_text(d / "intri.yml", "{{{ not: yaml"); },
+      {"intri.yml missing", [](const fs::path& d) { fs::remove(d / "intri.yml"); },
+       "intri.yml' is missing"},
+      {"intri.yml not YAML",
+       [](const fs::path& d) { write_text(d / "intri.yml", "{{{ not: yaml"); },
        "cannot be read as OpenCV FileStorage YAML"},
-      {"no names", [](const fs::path& d) { rewrite(d / "intri.yml", [](auto& n, auto&) { n.clear(); }); },
+      {"no names",
+       [](const fs::path& d) { rewrite(d / "intri.yml", [](auto& n, auto&) { n.clear(); }); },
        "intri.yml' has no 'names' list"},
-      {"a name twice", [](const fs::path& d) { rewrite(d / "intri.yml", [](auto& n, auto&) { n[1] = n[0]; }); },
+      {"a name twice",
+       [](const fs::path& d) { rewrite(d / "intri.yml", [](auto& n, auto&) { n[1] = n[0]; }); },
        "camera '00' is listed twice"},
-      {"K missing", [](const fs::path& d) { rewrite(d / "intri.yml", [](auto&, auto& e) { erase(e, "K_05"); }); },
+      {"K missing",
+       [](const fs::path& d) {
+         rewrite(d / "intri.yml", [](auto&, auto& e) { erase(e, "K_05"); });
+       },
        "intri.yml' has no 'K_05'"},
-      {"K 2x3", [](const fs::path& d) {
-         rewrite(d / "intri.yml", [](auto&, auto& e) { entry(e, "K_05") = entry(e, "K_05").rowRange(0, 2).clone(); });
-       }, "'K_05' is 2x3, expected 3x3"},
-      {"dist 1x4", [](const fs::path& d) {
-         rewrite(d / "intri.yml", [](auto&, auto& e) { entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone(); });
-       }, "'dist_05' is 1x4, expected 1x5 or 5x1"},
-      {"NaN in K", [](const fs::path& d) {
-         rewrite(d / "intri.yml", [](auto&, auto& e) { entry(e, "K_05").template at<double>(0, 0) = std::nan(""); });
-       }, "nan at index 0 (1 non-finite value)"},
-      {"no rotation", [](const fs::path& d) {
+      {"K 2x3",
+       [](const fs::path& d) {
+         rewrite(d / "intri.yml", [](auto&, auto& e) {
+           entry(e, "K_05") = entry(e, "K_05").rowRange(0, 2).clone();
+         });
+       },
+       "'K_05' is 2x3, expected 3x3"},
+      {"dist 1x4",
+       [](const fs::path& d) {
+         rewrite(d / "intri.yml", [](auto&, auto& e) {
+           entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone();
+         });
+       },
+       "'dist_05' is 1x4, expected 1x5 or 5x1"},
+      {"NaN in K",
+       [](const fs::path& d) {
+         rewrite(d / "intri.yml",
+                 [](auto&, auto& e) { entry(e, "K_05").template at<double>(0, 0) = std::nan(""); });
+       },
+       "nan at index 0 (1 non-finite value)"},
+      {"no rotation",
+       [](const fs::path& d) {
          rewrite(d / "extri.yml", [](auto&, auto& e) { erase(e, "R_05"), erase(e, "Rot_05"); });
-       }, "has neither 'Rot_05' nor 'R_05'"},
-      {"R against Rot", [](const fs::path& d) {
-         rewrite(d / "extri.yml", [](auto&, auto& e) { entry(e, "R_05").template at<double>(0, 0) += 0.1; });
-       }, "'R_05' (Rodrigues) and 'Rot_05' disagree by"},
-      {"T missing", [](const fs::path& d) { rewrite(d / "extri.yml", [](auto&, auto& e) { erase(e, "T_05"); }); },
+       },
+       "has neither 'Rot_05' nor 'R_05'"},
+      {"R against Rot",
+       [](const fs::path& d) {
+         rewrite(d / "extri.yml",
+                 [](auto&, auto& e) { entry(e, "R_05").template at<double>(0, 0) += 0.1; });
+       },
+       "'R_05' (Rodrigues) and 'Rot_05' disagree by"},
+      {"T missing",
+       [](const fs::path& d) {
+         rewrite(d / "extri.yml", [](auto&, auto& e) { erase(e, "T_05"); });
+       },
        "extri.yml' has no 'T_05'"},
-      {"camera folder missing", [](const fs::path& d) { fs::remove_all(d / "images" / "05"); }, "images/05' is missing"},
-      {"a frame missing in one camera", [](const fs::path& d) { fs::remove(d / "images" / "05" / "000002.jpg"); },
+      {"camera folder missing", [](const fs::path& d) { fs::remove_all(d / "images" / "05"); },
+       "images/05' is missing"},
+      {"a frame missing in one camera",
+       [](const fs::path& d) { fs::remove(d / "images" / "05" / "000002.jpg"); },
        "images/05/000002.jpg' is missing: camera '00' has frame 2 but camera '05' has not"},
-      {"an image not named by frame", [](const fs::path& d) {
+      {"an image not named by frame",
+       [](const fs::path& d) {
          fs::copy_file(d / "images" / "05" / "000002.jpg", d / "images" / "05" / "frame_b.jpg");
-       }, "are named by frame number"},
+       },
+       "are named by frame number"},
   };
   for (const auto& c : cases) {
     INFO(c.name);
@@ -179,34 +216,43 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
   }
   // calibration_check: warn goes on with Rot.
   const fs::path dir = capture_copy("easymocap_rot_warn");
-  rewrite(dir / "extri.yml", [](auto&, auto& e) { entry(e, "R_05").template at<double>(0, 0) += 0.1; });
+  rewrite(dir / "extri.yml",
+          [](auto&, auto& e) { entry(e, "R_05").template at<double>(0, 0) += 0.1; });
   const auto warned = EasyMocapSequence::open(dir, options(-1, th::CalibrationCheck::warn));
-  const auto clean = EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
+  const auto clean =
+      EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
   CHECK(torch::equal(warned->camera(5).R, clean->camera(5).R));
   // Either rotation form alone, and a 5x1 distortion.
   const fs::path alone = capture_copy("easymocap_rodrigues_only");
   rewrite(alone / "extri.yml", [](auto&, auto& e) { erase(e, "Rot_05"); });
-  rewrite(alone / "intri.yml", [](auto&, auto& e) { entry(e, "dist_05") = entry(e, "dist_05").t(); });
+  rewrite(alone / "intri.yml",
+          [](auto&, auto& e) { entry(e, "dist_05") = entry(e, "dist_05").t(); });
   const auto rodrigues_only = EasyMocapSequence::open(alone, options());
   CHECK(torch::allclose(rodrigues_only->camera(5).R, clean->camera(5).R, 0, 1e-12));
   CHECK(torch::equal(rodrigues_only->camera(5).D, clean->camera(5).D));
 }
 
 TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "[easymocap]") {
-  const auto damaged = [](const std::string& what, const std::function<void(const fs::path&)>& damage) {
+  const auto damaged = [](const std::string& what,
+                          const std::function<void(const fs::path&)>& damage) {
     const fs::path dir = capture_copy("easymocap_frame_" + what);
     damage(dir);
     return dir;
   };
   const fs::path smpl1 = fs::path("output") / "smpl" / "000001.json";
-  const auto open = [](const fs::path& dir, int id = -1) { return EasyMocapSequence::open(dir, options(id)); };
+  const auto open = [](const fs::path& dir, int id = -1) {
+    return EasyMocapSequence::open(dir, options(id));
+  };
 
   auto dir = damaged("missing", [&](const fs::path& d) { fs::remove(d / smpl1); });
-  CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("output/smpl/000001.json' is missing") &&
-                                                   Catch::Contains("smpl/000001.json"));
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("output/smpl/000001.json' is missing") &&
+                        Catch::Contains("smpl/000001.json"));
   CHECK_NOTHROW(open(dir)->load_params(0));
 
-  dir = damaged("json", [&](const fs::path& d) { write_text(d / smpl1, "[{\"id\": 0, \"Rh\": [[NaN, 0, 0]]}]"); });
+  dir = damaged("json", [&](const fs::path& d) {
+    write_text(d / smpl1, "[{\"id\": 0, \"Rh\": [[NaN, 0, 0]]}]");
+  });
   CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("000001.json' is not valid JSON"));
 
   dir = damaged("empty", [&](const fs::path& d) { write_text(d / smpl1, "[]"); });
@@ -221,9 +267,11 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
     write_text(d / smpl1, "[" + one + "," + other + "]");
   };
   dir = damaged("two", two);
-  CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("holds 2 people (ids 0, 3): set data.person_id"));
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("holds 2 people (ids 0, 3): set data.person_id"));
   CHECK(torch::equal(open(dir, 3)->load_params(1).poses, open(dir, 0)->load_params(1).poses));
-  CHECK_THROWS_WITH(open(dir, 7)->load_params(1), Catch::Contains("no person with id 7 (data.person_id; ids: 0, 3)"));
+  CHECK_THROWS_WITH(open(dir, 7)->load_params(1),
+                    Catch::Contains("no person with id 7 (data.person_id; ids: 0, 3)"));
 
   dir = damaged("poses", [&](const fs::path& d) {
     std::string t = read_text(d / smpl1);
@@ -231,14 +279,16 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
     t.erase(at, t.find(',', t.find(',', t.find(',', at) + 1) + 1) + 1 - at);  // drop three values
     write_text(d / smpl1, t);
   });
-  CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("person id 0's 'poses' has 69 values, expected 72"));
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("person id 0's 'poses' has 69 values, expected 72"));
 
   dir = damaged("text", [&](const fs::path& d) {
     std::string t = read_text(d / smpl1);
     t.replace(t.find("\"Th\":[["), 7, "\"Th\":[[\"x\",");
     write_text(d / smpl1, t);
   });
-  CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("person id 0's 'Th' holds string where numbers belong"));
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("person id 0's 'Th' holds string where numbers belong"));
 
   dir = damaged("shapes", [&](const fs::path& d) {
     std::string t = read_text(d / smpl1);
@@ -248,10 +298,12 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
     t.insert(at, zeros);
     write_text(d / smpl1, t);
   });
-  CHECK_THROWS_WITH(open(dir)->load_params(1), Catch::Contains("shape directions (is data.smpl_model the model"));
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("shape directions (is data.smpl_model the model"));
 
   dir = damaged("mask", [&](const fs::path& d) { fs::remove(d / "mask" / "05" / "000001.png"); });
-  CHECK_THROWS_WITH(open(dir)->load_mask(1, 5), Catch::Contains("no mask for") && Catch::Contains("mask/05/000001.png") &&
+  CHECK_THROWS_WITH(open(dir)->load_mask(1, 5), Catch::Contains("no mask for") &&
+                                                    Catch::Contains("mask/05/000001.png") &&
                                                     Catch::Contains("masks/05/000001.png"));
   // masks/ (the other spelling) is read as well.
   fs::create_directories(dir / "masks" / "05");
@@ -262,7 +314,8 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
   dir = damaged("mask_size", [&](const fs::path& d) {
     cv::imwrite((d / "mask" / "05" / "000001.png").string(), cv::Mat::zeros(10, 12, CV_8U));
   });
-  CHECK_THROWS_WITH(load_view(*open(dir), 1, 5, {}), Catch::Contains("mask of '") && Catch::Contains("is 12x10"));
+  CHECK_THROWS_WITH(load_view(*open(dir), 1, 5, {}),
+                    Catch::Contains("mask of '") && Catch::Contains("is 12x10"));
 
   dir = damaged("jpeg", [&](const fs::path& d) {
     const fs::path image = d / "images" / "05" / "000001.jpg";
@@ -273,11 +326,14 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
 }
 
 TEST_CASE("cameras are chosen by name or index, quoted split entries being names", "[easymocap]") {
-  const auto em = EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
-  CHECK(camera_index(*em, "07", "here") == 7);   // the name "07"
-  CHECK(camera_index(*em, "7", "here") == 7);    // index 7, also called "07"
-  CHECK_THROWS_WITH(camera_index(*em, "A1", "here"), Catch::Contains("here: CoreView_s03 has no camera 'A1' (its cameras: 00, 01"));
-  CHECK_THROWS_WITH(camera_index(*em, "40", "here"), Catch::Contains("camera 40 does not exist for CoreView_s03 (23 cameras"));
+  const auto em =
+      EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
+  CHECK(camera_index(*em, "07", "here") == 7);  // the name "07"
+  CHECK(camera_index(*em, "7", "here") == 7);   // index 7, also called "07"
+  CHECK_THROWS_WITH(camera_index(*em, "A1", "here"),
+                    Catch::Contains("here: CoreView_s03 has no camera 'A1' (its cameras: 00, 01"));
+  CHECK_THROWS_WITH(camera_index(*em, "40", "here"),
+                    Catch::Contains("camera 40 does not exist for CoreView_s03 (23 cameras"));
   // Names 1-based, as many rigs count: "15" names camera 14 and indexes camera 15.
   const fs::path dir = capture_copy("easymocap_one_based");
   for (const char* file : {"intri.yml", "extri.yml"}) {
@@ -288,7 +344,8 @@ TEST_CASE("cameras are chosen by name or index, quoted split entries being names
       std::snprintf(to, sizeof to, "%02d", c + 1);
       for (const std::string prefix : {"\"", "K_", "dist_", "R_", "Rot_", "T_"}) {
         size_t at = 0;
-        while ((at = text.find(prefix + from + (prefix == "\"" ? "\"" : ":"), at)) != std::string::npos) {
+        while ((at = text.find(prefix + from + (prefix == "\"" ? "\"" : ":"), at)) !=
+               std::string::npos) {
           text.replace(at + prefix.size(), 2, to);
           at += prefix.size() + 2;
         }
@@ -305,25 +362,30 @@ TEST_CASE("cameras are chosen by name or index, quoted split entries being names
   }
   const auto one_based = EasyMocapSequence::open(dir, options());
   CHECK(one_based->camera_name(0) == "01");
-  CHECK(camera_index(*one_based, "01", "here") == 0);                 // names first
+  CHECK(camera_index(*one_based, "01", "here") == 0);  // names first
   CHECK(camera_index(*one_based, "15", "here") == 14);
   CHECK(camera_index(*one_based, "15", "here", /*index_only=*/true) == 15);
-  CHECK(camera_index(*one_based, "0", "here") == 0);                  // no camera "0": index 0
+  CHECK(camera_index(*one_based, "0", "here") == 0);  // no camera "0": index 0
   // In a split file a quoted entry is a name and a plain number an index.
   const fs::path split = dir.parent_path() / "split.yaml";
-  write_text(split, "settings:\n  s:\n    reference_views: [\"01\", \"08\", 15]\n    target_views: [cam_a]\n"
-                    "    humans: [{name: CoreView_s03, begin: 0, ni: 1, interval: 1}]\n");
+  write_text(
+      split,
+      "settings:\n  s:\n    reference_views: [\"01\", \"08\", 15]\n    target_views: [cam_a]\n"
+      "    humans: [{name: CoreView_s03, begin: 0, ni: 1, interval: 1}]\n");
   const auto s = load_split(split, "s");
   CHECK(s.reference_views == std::vector<CameraRef>{{"01", false}, {"08", false}, {"15", true}});
   CHECK(s.target_views == std::vector<CameraRef>{{"cam_a", false}});
   std::vector<int> picked;
-  for (const auto& v : s.reference_views) picked.push_back(camera_index(*one_based, v.text, "split", v.index));
+  for (const auto& v : s.reference_views)
+    picked.push_back(camera_index(*one_based, v.text, "split", v.index));
   CHECK(picked == std::vector<int>{0, 7, 15});
 }
 
-TEST_CASE("a capture without a split file uses every frame and the most spread reference cameras", "[easymocap]") {
+TEST_CASE("a capture without a split file uses every frame and the most spread reference cameras",
+          "[easymocap]") {
   const fs::path root = th::test::scratch_dir("easymocap_no_split");
-  fs::copy(th::test::tiny_easymocap_dataset() / "CoreView_s03", root / "CoreView_s03", fs::copy_options::recursive);
+  fs::copy(th::test::tiny_easymocap_dataset() / "CoreView_s03", root / "CoreView_s03",
+           fs::copy_options::recursive);
   auto c = capture_config(root);
   const Dataset test(c, "identity", Dataset::Mode::Test, body_model());
   REQUIRE(test.humans().size() == 1);
@@ -352,18 +414,22 @@ TEST_CASE("a capture without a split file uses every frame and the most spread r
 
   // An empty data.root is named.
   c.root = th::test::scratch_dir("easymocap_empty_root").string();
-  CHECK_THROWS_WITH(Dataset(c, "identity", Dataset::Mode::Test, body_model()),
-                    Catch::Contains("holds no person's folder") && Catch::Contains("data.split_file is empty"));
+  CHECK_THROWS_WITH(
+      Dataset(c, "identity", Dataset::Mode::Test, body_model()),
+      Catch::Contains("holds no person's folder") && Catch::Contains("data.split_file is empty"));
 }
 
 TEST_CASE("the most evenly spread cameras of a ring split it into near-equal arcs", "[easymocap]") {
-  const auto em = EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
+  const auto em =
+      EasyMocapSequence::open(th::test::tiny_easymocap_dataset() / "CoreView_s03", options());
   const auto body = em->load_vertices(0);
   CHECK(spread_cameras(*em, body, 1) == std::vector<int>{0});
   const auto four = spread_cameras(*em, body, 4);
   REQUIRE(four.size() == 4);
   CHECK(std::is_sorted(four.begin(), four.end()));
   // 23 cameras in a ring: four picks leave gaps of 5 or 6 cameras.
-  for (size_t i = 0; i + 1 < four.size(); ++i) CHECK((four[i + 1] - four[i] == 5 || four[i + 1] - four[i] == 6));
-  CHECK_THROWS_WITH(spread_cameras(*em, body, 24), Catch::Contains("24 reference views asked for but it has 23 cameras"));
+  for (size_t i = 0; i + 1 < four.size(); ++i)
+    CHECK((four[i + 1] - four[i] == 5 || four[i + 1] - four[i] == 6));
+  CHECK_THROWS_WITH(spread_cameras(*em, body, 24),
+                    Catch::Contains("24 reference views asked for but it has 23 cameras"));
 }

@@ -26,9 +26,11 @@ th::DataConfig brightness_only(bool enabled) {
 }
 
 // The factor b with jittered = b * plain over the lit pixels, and the largest deviation from it.
-std::pair<double, double> brightness_factor(const torch::Tensor& jittered, const torch::Tensor& plain) {
+std::pair<double, double> brightness_factor(const torch::Tensor& jittered,
+                                            const torch::Tensor& plain) {
   const auto lit = plain > 0.05;
-  const double b = (jittered.masked_select(lit).sum() / plain.masked_select(lit).sum()).item<double>();
+  const double b =
+      (jittered.masked_select(lit).sum() / plain.masked_select(lit).sum()).item<double>();
   return {b, (jittered - b * plain).abs().max().item<double>()};
 }
 

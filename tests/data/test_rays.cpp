@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <fstream>
 #include <opencv2/imgproc.hpp>
 
@@ -98,7 +97,8 @@ TEST_CASE("near/far equals an independent numpy implementation on random rays", 
 
 TEST_CASE("pixel rays pass through their pixels and have camera depth as parameter", "[rays]") {
   const auto K =
-      torch::tensor({500.0, 0.0, 128.0, 0.0, 500.0, 120.0, 0.0, 0.0, 1.0}, torch::kFloat64).reshape({3, 3});
+      torch::tensor({500.0, 0.0, 128.0, 0.0, 500.0, 120.0, 0.0, 0.0, 1.0}, torch::kFloat64)
+          .reshape({3, 3});
   const auto R = torch::eye(3, torch::kFloat64);
   const auto T = torch::tensor({0.1, -0.2, 3.0}, torch::kFloat64).reshape({3, 1});
   const auto px = torch::tensor({{10, 20}, {128, 120}, {255, 0}}, torch::kInt64);
@@ -117,7 +117,8 @@ TEST_CASE("pixel rays pass through their pixels and have camera depth as paramet
 TEST_CASE("the 2D box mask covers exactly the projections of rays that hit the box", "[rays]") {
   const auto K = torch::tensor({200.0, 0.0, 64.0, 0.0, 200.0, 64.0, 0.0, 0.0, 1.0}).reshape({3, 3});
   const double c = std::cos(0.4), s = std::sin(0.4);
-  const auto R = torch::tensor({c, 0.0, -s, 0.0, 1.0, 0.0, s, 0.0, c}, torch::kFloat64).reshape({3, 3});
+  const auto R =
+      torch::tensor({c, 0.0, -s, 0.0, 1.0, 0.0, s, 0.0, c}, torch::kFloat64).reshape({3, 3});
   const auto T = torch::tensor({0.0, 0.0, 5.0}, torch::kFloat64).reshape({3, 1});
   const auto box = unit_box() * 0.6;
   const cv::Mat mask = box_mask(box, K, R, T, 128, 128);
@@ -171,5 +172,6 @@ TEST_CASE("patches near the border are clipped to the image", "[rays][patches]")
 TEST_CASE("bounds are the vertex AABB padded on z only", "[rays]") {
   const auto v = torch::tensor({0.0, 1.0, 2.0, -1.0, 0.5, 3.0}, torch::kFloat64).reshape({2, 3});
   const auto b = bounds_of(v, 0.05);
-  CHECK(torch::allclose(b, torch::tensor({-1.0, 0.5, 1.95, 0.0, 1.0, 3.05}, torch::kFloat64).reshape({2, 3})));
+  CHECK(torch::allclose(
+      b, torch::tensor({-1.0, 0.5, 1.95, 0.0, 1.0, 3.05}, torch::kFloat64).reshape({2, 3})));
 }

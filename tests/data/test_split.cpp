@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <cstdio>
 #include <fstream>
 
@@ -19,8 +18,9 @@ namespace {
 void write_annots(const fs::path& root, const std::string& name, int frames, int cameras) {
   Value::List K, R, T, D, ims;
   for (int c = 0; c < cameras; ++c) {
-    K.push_back(Value::array(torch::tensor({500.0, 0.0, 256.0, 0.0, 500.0, 256.0, 0.0, 0.0, 1.0}, torch::kFloat64)
-                                 .reshape({3, 3})));
+    K.push_back(Value::array(
+        torch::tensor({500.0, 0.0, 256.0, 0.0, 500.0, 256.0, 0.0, 0.0, 1.0}, torch::kFloat64)
+            .reshape({3, 3})));
     R.push_back(Value::array(torch::eye(3, torch::kFloat64)));
     T.push_back(Value::array(torch::zeros({3, 1}, torch::kFloat64)));
     D.push_back(Value::array(torch::zeros({5, 1}, torch::kFloat64)));
@@ -39,8 +39,9 @@ void write_annots(const fs::path& root, const std::string& name, int frames, int
                                   {Value::str("T"), Value::list(T)},
                                   {Value::str("D"), Value::list(D)}});
   fs::create_directories(root / name);
-  th::io::write_npy_value(root / name / "annots.npy",
-                          Value::dict({{Value::str("cams"), cams}, {Value::str("ims"), Value::list(ims)}}));
+  th::io::write_npy_value(
+      root / name / "annots.npy",
+      Value::dict({{Value::str("cams"), cams}, {Value::str("ims"), Value::list(ims)}}));
 }
 
 size_t samples(const fs::path& root, const std::string& split, const std::string& setting,
@@ -74,13 +75,20 @@ TEST_CASE("ZJU-MoCap split sizes match the paper for annots of the real lengths"
 
 TEST_CASE("the H36M cross-dataset split has 54 target images", "[split]") {
   const fs::path root = th::test::scratch_dir("h36m_split_sizes");
-  for (const auto& [name, frames] : std::vector<std::pair<std::string, int>>{
-           {"S1", 750}, {"S5", 1250}, {"S6", 750}, {"S7", 1500}, {"S8", 1250}, {"S9", 1300}, {"S11", 1000}})
+  for (const auto& [name, frames] : std::vector<std::pair<std::string, int>>{{"S1", 750},
+                                                                             {"S5", 1250},
+                                                                             {"S6", 750},
+                                                                             {"S7", 1500},
+                                                                             {"S8", 1250},
+                                                                             {"S9", 1300},
+                                                                             {"S11", 1000}})
     write_annots(root / name, "Posing", frames, 4);  // Animatable NeRF's <S>/Posing layout
   CHECK(samples(root, "data_splits/h36m.yaml", "cross_dataset", th::DatasetKind::h36m) == 54);
   // data.dataset names the layout: the H36M folders read as ZJU-MoCap fail naming the key.
-  CHECK_THROWS_WITH(samples(root, "data_splits/h36m.yaml", "cross_dataset", th::DatasetKind::zju_mocap),
-                    Catch::Contains((root / "S1" / "annots.npy").string()) && Catch::Contains("data.dataset: h36m"));
+  CHECK_THROWS_WITH(
+      samples(root, "data_splits/h36m.yaml", "cross_dataset", th::DatasetKind::zju_mocap),
+      Catch::Contains((root / "S1" / "annots.npy").string()) &&
+          Catch::Contains("data.dataset: h36m"));
 }
 
 TEST_CASE("ZJU-MoCap folders read as H36M fail naming data.dataset", "[split]") {
@@ -98,16 +106,19 @@ TEST_CASE("an unknown setting or a missing human folder is named in the error", 
   CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
                     Catch::Contains("CoreView_387") && Catch::Contains("does not exist"));
   write_annots(root, "CoreView_387", 30, 5);
-  CHECK_THROWS_WITH(samples(root, "data_splits/zju_mocap.yaml", "identity"),
-                    Catch::Contains("reference_views: camera 7 does not exist for CoreView_387 (5 cameras"));
+  CHECK_THROWS_WITH(
+      samples(root, "data_splits/zju_mocap.yaml", "identity"),
+      Catch::Contains("reference_views: camera 7 does not exist for CoreView_387 (5 cameras"));
 }
 
-TEST_CASE("split integers are decimal and person names hold no control character or formula", "[split]") {
+TEST_CASE("split integers are decimal and person names hold no control character or formula",
+          "[split]") {
   const fs::path dir = th::test::scratch_dir("split_names");
   auto split_with = [&](const std::string& human, const std::string& begin) {
     const fs::path file = dir / "split.yaml";
-    std::ofstream(file) << "settings:\n  s:\n    reference_views: [0, 07]\n    target_views: [010]\n    humans:\n"
-                        << "      - {name: " << human << ", begin: " << begin << ", ni: 2, interval: 1}\n";
+    std::ofstream(file)
+        << "settings:\n  s:\n    reference_views: [0, 07]\n    target_views: [010]\n    humans:\n"
+        << "      - {name: " << human << ", begin: " << begin << ", ni: 2, interval: 1}\n";
     return file;
   };
   const auto s = th::data::load_split(split_with("CoreView_1", "010"), "s");
@@ -118,12 +129,14 @@ TEST_CASE("split integers are decimal and person names hold no control character
   CHECK_THROWS_WITH(th::data::load_split(split_with("CoreView_1", "0x10"), "s"),
                     Catch::Contains("humans[0]: 'begin' must be a decimal integer"));
   CHECK_THROWS_WITH(th::data::load_split(split_with("\"Core\\nView\"", "0"), "s"),
-                    Catch::Contains("split file '" + (dir / "split.yaml").string() + "', setting 's', humans[0]") &&
+                    Catch::Contains("split file '" + (dir / "split.yaml").string() +
+                                    "', setting 's', humans[0]") &&
                         Catch::Contains("holds a control character (0x0a)"));
   CHECK_THROWS_WITH(th::data::load_split(split_with("\"Core\\tView\"", "0"), "s"),
                     Catch::Contains("control character (0x09)"));
   for (const char* formula : {"\"=cmd|' /C calc'!A0\"", "\"+1\"", "\"-1\"", "\"@SUM(1)\""})
     CHECK_THROWS_WITH(th::data::load_split(split_with(formula, "0"), "s"),
                       Catch::Contains("spreadsheets read as a formula"));
-  CHECK(th::data::load_split(split_with("\"Core,View \\\"1\\\"\"", "0"), "s").humans.at(0).name == "Core,View \"1\"");
+  CHECK(th::data::load_split(split_with("\"Core,View \\\"1\\\"\"", "0"), "s").humans.at(0).name ==
+        "Core,View \"1\"");
 }

@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <fstream>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -35,7 +34,8 @@ std::shared_ptr<const Dataset> open(const fs::path& root, const std::string& set
 // A private copy of the tiny dataset that a test may damage.
 fs::path copy_of_tiny(const std::string& name) {
   const fs::path dst = th::test::scratch_dir(name);
-  fs::copy(th::test::tiny_dataset(), dst, fs::copy_options::recursive | fs::copy_options::overwrite_existing);
+  fs::copy(th::test::tiny_dataset(), dst,
+           fs::copy_options::recursive | fs::copy_options::overwrite_existing);
   return dst;
 }
 
@@ -88,13 +88,15 @@ TEST_CASE("visible body vertices project inside the person's mask", "[dataset][v
   // Exact fits (no fitting noise): the body lies inside the clothed silhouette; where skin is
   // the surface, silhouette vertices sit on the mask's edge, hence the 1-pixel tolerance.
   // Full resolution of the tiny data (128 px): at 64 px an arm is two pixels wide.
-  const auto ds = open(th::test::tiny_dataset(/*exact=*/true), "identity", Dataset::Mode::Test, 1.0);
+  const auto ds =
+      open(th::test::tiny_dataset(/*exact=*/true), "identity", Dataset::Mode::Test, 1.0);
   const auto& human = *ds->humans()[0];
   const Sample s = ds->load(0, 0);
   for (size_t v = 0; v < s.reference_views.size(); ++v) {
     const ViewImage view = load_view(human, s.frame, s.reference_views[v], {1.0, false, nullptr});
     const auto vis = s.visibility[v];
-    const auto uv = th::geometry::project_points(s.body.vertices.index({vis}), s.ref_K[v], s.ref_R[v], s.ref_T[v]);
+    const auto uv = th::geometry::project_points(s.body.vertices.index({vis}), s.ref_K[v],
+                                                 s.ref_R[v], s.ref_T[v]);
     const auto px = torch::round(uv).to(torch::kInt64);
     int inside = 0;
     auto a = px.accessor<int64_t, 2>();
@@ -142,27 +144,35 @@ TEST_CASE("bad data fails with an error naming the file", "[dataset][errors]") {
 
   SECTION("a missing camera folder") {
     fs::remove_all(root / "CoreView_s03" / "Camera_B1");
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains("Camera_B1") && Catch::Contains("missing"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains("Camera_B1") && Catch::Contains("missing"));
   }
   SECTION("a params file with a wrong shape") {
     th::io::Value::Dict d;
-    d.emplace_back(th::io::Value::str("poses"), th::io::Value::array(torch::zeros({1, 69}, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("Rh"), th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("Th"), th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("shapes"), th::io::Value::array(torch::zeros({1, 10}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("poses"),
+                   th::io::Value::array(torch::zeros({1, 69}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Rh"),
+                   th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Th"),
+                   th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("shapes"),
+                   th::io::Value::array(torch::zeros({1, 10}, torch::kFloat64)));
     const fs::path file = root / "CoreView_s03" / "new_params" / "0.npy";
     th::io::write_npy_value(file, th::io::Value::dict(d));
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) && Catch::Contains("'poses' has 69 values"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains(file.string()) && Catch::Contains("'poses' has 69 values"));
   }
   SECTION("fewer images than annots lists") {
     const fs::path img = root / "CoreView_s03" / "Camera_B8" / "000000.jpg";
     fs::remove(img);
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(img.string()) && Catch::Contains("missing"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains(img.string()) && Catch::Contains("missing"));
   }
   SECTION("a corrupt image") {
     const fs::path img = root / "CoreView_s03" / "Camera_B4" / "000000.jpg";
     std::ofstream(img, std::ios::binary | std::ios::trunc) << "not a jpeg";
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(img.string()) && Catch::Contains("corrupt"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains(img.string()) && Catch::Contains("corrupt"));
   }
   SECTION("a truncated image") {
     const fs::path img = root / "CoreView_s03" / "Camera_B4" / "000000.jpg";
@@ -170,7 +180,8 @@ TEST_CASE("bad data fails with an error naming the file", "[dataset][errors]") {
     const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
     in.close();
     std::ofstream(img, std::ios::binary | std::ios::trunc) << bytes.substr(0, bytes.size() * 2 / 3);
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(img.string()) && Catch::Contains("truncated"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains(img.string()) && Catch::Contains("truncated"));
   }
   SECTION("mask and mask_cihp of different sizes") {
     const fs::path a = root / "CoreView_s03" / "mask" / "Camera_B1" / "000000.png";
@@ -178,7 +189,8 @@ TEST_CASE("bad data fails with an error naming the file", "[dataset][errors]") {
     const fs::path present = fs::exists(a) ? a : b, other = fs::exists(a) ? b : a;
     fs::create_directories(other.parent_path());
     cv::imwrite(other.string(), cv::Mat::zeros(17, 23, CV_8U));
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(other.string()) && Catch::Contains("23x17"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains(other.string()) && Catch::Contains("23x17"));
   }
   SECTION("a missing mask") {
     fs::remove_all(root / "CoreView_s03" / "mask");
@@ -190,28 +202,36 @@ TEST_CASE("bad data fails with an error naming the file", "[dataset][errors]") {
     auto v = th::io::read_npy(file).clone();
     v[5][1] = std::nan("");
     th::io::write_npy(file, v);
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) && Catch::Contains("nan") &&
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) &&
+                                                  Catch::Contains("nan") &&
                                                   Catch::Contains("index 16"));
   }
   SECTION("a non-finite global translation") {
     th::io::Value::Dict d;
-    d.emplace_back(th::io::Value::str("poses"), th::io::Value::array(torch::zeros({1, 72}, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("Rh"), th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("Th"), th::io::Value::array(torch::full({1, 3}, INFINITY, torch::kFloat64)));
-    d.emplace_back(th::io::Value::str("shapes"), th::io::Value::array(torch::zeros({1, 10}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("poses"),
+                   th::io::Value::array(torch::zeros({1, 72}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Rh"),
+                   th::io::Value::array(torch::zeros({1, 3}, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("Th"),
+                   th::io::Value::array(torch::full({1, 3}, INFINITY, torch::kFloat64)));
+    d.emplace_back(th::io::Value::str("shapes"),
+                   th::io::Value::array(torch::zeros({1, 10}, torch::kFloat64)));
     const fs::path file = root / "CoreView_s03" / "new_params" / "0.npy";
     th::io::write_npy_value(file, th::io::Value::dict(d));
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) && Catch::Contains("'Th'") &&
+    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains(file.string()) &&
+                                                  Catch::Contains("'Th'") &&
                                                   Catch::Contains("inf"));
   }
   SECTION("a vertices file of another body model") {
     const fs::path file = root / "CoreView_s03" / "new_vertices" / "0.npy";
     th::io::write_npy(file, torch::zeros({10, 3}));
-    CHECK_THROWS_WITH(load_first("identity"), Catch::Contains("10 vertices") && Catch::Contains("body model"));
+    CHECK_THROWS_WITH(load_first("identity"),
+                      Catch::Contains("10 vertices") && Catch::Contains("body model"));
   }
 }
 
-TEST_CASE("the prefetcher returns the samples of its order and rethrows load errors", "[dataset][prefetch]") {
+TEST_CASE("the prefetcher returns the samples of its order and rethrows load errors",
+          "[dataset][prefetch]") {
   const auto ds = open(th::test::tiny_dataset(), "training", Dataset::Mode::Train);
   const std::vector<size_t> order = {5, 1, 9, 1};
   const std::vector<uint64_t> seeds = {1, 2, 3, 4};
@@ -228,17 +248,21 @@ TEST_CASE("the prefetcher returns the samples of its order and rethrows load err
   CHECK_THROWS(bad.next());
 }
 
-TEST_CASE("visibility files are found by frame number, zero-padded like the renamed images", "[dataset][visibility][parity]") {
+TEST_CASE("visibility files are found by frame number, zero-padded like the renamed images",
+          "[dataset][visibility][parity]") {
   const fs::path root = copy_of_tiny("visibility_files");
   const fs::path vis_root = root / "zju_rasterization";
   // The zju_rasterization names: Camera_B<k>/%06d.npy, and for CoreView_313/315 (whose images
   // keep their original long names here) Camera (<k>)/%04d.npy of the 1-based frame number.
   const auto h313 = ZjuMocapSequence::open(root / "CoreView_313");
   CHECK(h313->image_path(0, 0).filename().string().rfind("CoreView_313_Camera_(1)_0001", 0) == 0);
-  CHECK(visibility_file(vis_root, *h313, 0, 0) == vis_root / "CoreView_313" / "visibility" / "Camera (1)" / "0001.npy");
-  CHECK(visibility_file(vis_root, *h313, 1, 2) == vis_root / "CoreView_313" / "visibility" / "Camera (3)" / "0002.npy");
+  CHECK(visibility_file(vis_root, *h313, 0, 0) ==
+        vis_root / "CoreView_313" / "visibility" / "Camera (1)" / "0001.npy");
+  CHECK(visibility_file(vis_root, *h313, 1, 2) ==
+        vis_root / "CoreView_313" / "visibility" / "Camera (3)" / "0002.npy");
   const auto s03 = ZjuMocapSequence::open(root / "CoreView_s03");
-  CHECK(visibility_file(vis_root, *s03, 0, 4) == vis_root / "CoreView_s03" / "visibility" / "Camera_B5" / "000000.npy");
+  CHECK(visibility_file(vis_root, *s03, 0, 4) ==
+        vis_root / "CoreView_s03" / "visibility" / "Camera_B5" / "000000.npy");
 
   // Files for every view of every person: the dataset reads them as they are.
   auto c = tiny_config(root);
@@ -263,7 +287,9 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
   const Sample s = ds.load(0, 0);
   const auto human = ds.humans()[0];
   for (size_t v = 0; v < s.reference_views.size(); ++v)
-    CHECK(torch::equal(s.visibility[int64_t(v)], written.at(visibility_file(vis_root, *human, s.frame, s.reference_views[v]))));
+    CHECK(
+        torch::equal(s.visibility[int64_t(v)],
+                     written.at(visibility_file(vis_root, *human, s.frame, s.reference_views[v]))));
 
   // A missing file is an error naming it, unless all-visible is asked for explicitly.
   const fs::path missing = visibility_file(vis_root, *human, s.frame, s.reference_views[1]);
@@ -275,14 +301,17 @@ TEST_CASE("visibility files are found by frame number, zero-padded like the rena
   CHECK(torch::equal(lenient.visibility[0], s.visibility[0]));
 }
 
-TEST_CASE("the target mask's border band is marked before undistortion, as the reference does", "[dataset][parity]") {
+TEST_CASE("the target mask's border band is marked before undistortion, as the reference does",
+          "[dataset][parity]") {
   // METHOD 2.1 step 6 [parity]: band on the distorted mask, then both undistorted (bilinear), so
   // edge pixels hold blends of 0, 1 and 100; the background is black where the result is 0.
   const fs::path root = copy_of_tiny("band_parity");
   const fs::path dir = root / "CoreView_s03";
-  REQUIRE(th::test::run_python("tests/python/view_reference.py", "distort " + dir.string() + " -0.3 0.1") == 0);
+  REQUIRE(th::test::run_python("tests/python/view_reference.py",
+                               "distort " + dir.string() + " -0.3 0.1") == 0);
   const fs::path out = th::test::scratch_dir("band_parity_out");
-  REQUIRE(th::test::run_python("tests/python/view_reference.py", "view " + dir.string() + " 0 0 0.5 " + out.string()) == 0);
+  REQUIRE(th::test::run_python("tests/python/view_reference.py",
+                               "view " + dir.string() + " 0 0 0.5 " + out.string()) == 0);
   const auto ref_mask = th::io::read_npy(out / "mask.npy");
   const auto ref_image = th::io::read_npy(out / "image.npy");
 
@@ -291,8 +320,10 @@ TEST_CASE("the target mask's border band is marked before undistortion, as the r
   o.ratio = 0.5;
   o.border_band = true;
   const ViewImage view = load_view(*human, 0, 0, o);
-  const auto mask = torch::from_blob(view.mask.data, {view.mask.rows, view.mask.cols}, torch::kUInt8).clone();
-  const auto image = torch::from_blob(view.rgb.data, {view.rgb.rows, view.rgb.cols, 3}, torch::kFloat32).clone();
+  const auto mask =
+      torch::from_blob(view.mask.data, {view.mask.rows, view.mask.cols}, torch::kUInt8).clone();
+  const auto image =
+      torch::from_blob(view.rgb.data, {view.rgb.rows, view.rgb.cols, 3}, torch::kFloat32).clone();
   REQUIRE(mask.sizes() == ref_mask.sizes());
   CHECK(torch::equal(mask, ref_mask));
   CHECK(torch::equal(image, ref_image));
@@ -302,6 +333,7 @@ TEST_CASE("the target mask's border band is marked before undistortion, as the r
   // Marking the band after undistortion (the non-default order) gives another mask.
   o.band_before_undistort = false;
   const ViewImage other = load_view(*human, 0, 0, o);
-  const auto other_mask = torch::from_blob(other.mask.data, {other.mask.rows, other.mask.cols}, torch::kUInt8).clone();
+  const auto other_mask =
+      torch::from_blob(other.mask.data, {other.mask.rows, other.mask.cols}, torch::kUInt8).clone();
   CHECK_FALSE(torch::equal(other_mask, ref_mask));
 }

@@ -9,8 +9,8 @@
 
 #include <cerrno>
 #include <chrono>
-#include <cstring>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -23,7 +23,9 @@
 
 namespace th::test {
 
-inline std::filesystem::path train_executable() { return build_dir() / "apps" / "transhuman-train"; }
+inline std::filesystem::path train_executable() {
+  return build_dir() / "apps" / "transhuman-train";
+}
 
 struct Process {
   pid_t pid = -1;
@@ -51,7 +53,8 @@ inline Process spawn(const std::vector<std::string>& args, const std::vector<std
     }
     ::execve(argv[0], argv.data(), envp.data());
     // Into the log: the test prints it, and "exit 127" alone says nothing.
-    const std::string why = std::string("cannot run ") + argv[0] + ": " + std::strerror(errno) + "\n";
+    const std::string why =
+        std::string("cannot run ") + argv[0] + ": " + std::strerror(errno) + "\n";
     (void)!::write(2, why.data(), why.size());
     ::_exit(127);
   }

@@ -1,6 +1,6 @@
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <chrono>
 #include <cstdlib>
 #include <filesystem>
@@ -13,11 +13,11 @@
 #include "data/sampler.hpp"
 #include "dist/communicator.hpp"
 #include "dist/launcher.hpp"
-#include "support/test_env.hpp"
 #include "dist/processes.hpp"
 #include "model/encoder.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "support/test_env.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -28,18 +28,21 @@ namespace {
 // The tiny training configuration of tests/train, as command-line overrides.
 std::vector<std::string> tiny_overrides(std::vector<std::string> extra = {}) {
   const auto root = th::test::tiny_dataset();
-  std::vector<std::string> o{"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
-                             "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
-                             "train.val_views=0"};
+  std::vector<std::string> o{
+      "data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+      "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
+      "train.val_views=0"};
   o.insert(o.end(), extra.begin(), extra.end());
   return o;
 }
 
 th::Config tiny_config(std::vector<std::string> extra = {}) {
-  return th::config::load<th::Config>("tests/configs/tiny_train.yaml", tiny_overrides(std::move(extra)));
+  return th::config::load<th::Config>("tests/configs/tiny_train.yaml",
+                                      tiny_overrides(std::move(extra)));
 }
 
-std::vector<std::string> train_command(const fs::path& out, const std::vector<std::string>& extra_args,
+std::vector<std::string> train_command(const fs::path& out,
+                                       const std::vector<std::string>& extra_args,
                                        const std::vector<std::string>& overrides) {
   std::vector<std::string> args{th::test::train_executable().string(), "--config",
                                 "tests/configs/tiny_train.yaml", "--out", out.string()};
@@ -49,11 +52,14 @@ std::vector<std::string> train_command(const fs::path& out, const std::vector<st
 }
 
 // Rank `r` of `world` started by hand (as any launcher would).
-Process start_rank(int r, int world, int port, const std::vector<std::string>& args, const fs::path& log) {
-  return th::test::spawn(args, {"RANK=" + std::to_string(r), "WORLD_SIZE=" + std::to_string(world),
-                                "LOCAL_RANK=" + std::to_string(r), "LOCAL_WORLD_SIZE=" + std::to_string(world),
-                                "MASTER_ADDR=127.0.0.1", "MASTER_PORT=" + std::to_string(port)},
-                         log);
+Process start_rank(int r, int world, int port, const std::vector<std::string>& args,
+                   const fs::path& log) {
+  return th::test::spawn(
+      args,
+      {"RANK=" + std::to_string(r), "WORLD_SIZE=" + std::to_string(world),
+       "LOCAL_RANK=" + std::to_string(r), "LOCAL_WORLD_SIZE=" + std::to_string(world),
+       "MASTER_ADDR=127.0.0.1", "MASTER_PORT=" + std::to_string(port)},
+      log);
 }
 
 struct State {
@@ -75,14 +81,16 @@ State state_of(const fs::path& checkpoint, const th::Config& c) {
   return s;
 }
 
-double max_difference(const std::map<std::string, torch::Tensor>& a, const std::map<std::string, torch::Tensor>& b) {
+double max_difference(const std::map<std::string, torch::Tensor>& a,
+                      const std::map<std::string, torch::Tensor>& b) {
   REQUIRE(a.size() == b.size());
   double d = 0;
   for (const auto& [name, t] : a) d = std::max(d, (t - b.at(name)).abs().max().item<double>());
   return d;
 }
 
-size_t count_differing(const std::map<std::string, torch::Tensor>& a, const std::map<std::string, torch::Tensor>& b) {
+size_t count_differing(const std::map<std::string, torch::Tensor>& a,
+                       const std::map<std::string, torch::Tensor>& b) {
   size_t n = 0;
   for (const auto& [name, t] : a) n += !torch::equal(t, b.at(name));
   return n;
@@ -137,9 +145,10 @@ TEST_CASE("the sharded sampler gives each rank different samples of the same epo
   for (size_t i = 0; i < n + 2; ++i) CHECK(single.order[i] == perm[i % n]);
 }
 
-TEST_CASE("the workers of --nproc N run this program without it, in the run directory named first", "[dist]") {
-  const char* argv[] = {"transhuman-train", "--config", "c.yaml", "--nproc", "2", "train.epochs=3",
-                        "--nproc=4", "--max-steps", "5"};
+TEST_CASE("the workers of --nproc N run this program without it, in the run directory named first",
+          "[dist]") {
+  const char* argv[] = {"transhuman-train", "--config",  "c.yaml",      "--nproc", "2",
+                        "train.epochs=3",   "--nproc=4", "--max-steps", "5"};
   const int argc = int(std::size(argv));
   const auto args = th::dist::worker_args(argc, argv, "runs/train");
   REQUIRE(args.size() == 8);
@@ -158,7 +167,8 @@ TEST_CASE("the workers of --nproc N run this program without it, in the run dire
 
 TEST_CASE("the launcher environment is read, and bad values are named", "[dist]") {
   auto set = [](const char* k, const char* v) { v ? ::setenv(k, v, 1) : ::unsetenv(k); };
-  const auto keys = {"RANK", "WORLD_SIZE", "LOCAL_RANK", "LOCAL_WORLD_SIZE", "MASTER_ADDR", "MASTER_PORT"};
+  const auto keys = {"RANK",        "WORLD_SIZE", "LOCAL_RANK", "LOCAL_WORLD_SIZE",
+                     "MASTER_ADDR", "MASTER_PORT"};
   for (const char* k : keys) set(k, nullptr);
   CHECK_FALSE(th::dist::environment_from_env().has_value());
   set("WORLD_SIZE", "4");
@@ -176,44 +186,53 @@ TEST_CASE("the launcher environment is read, and bad values are named", "[dist]"
   set("LOCAL_WORLD_SIZE", "02");  // decimal, as every integer
   CHECK(th::dist::environment_from_env()->local_world_size == 2);
   set("LOCAL_WORLD_SIZE", "abc");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(),
-                    Catch::Contains("environment variable LOCAL_WORLD_SIZE='abc' must be an integer in [1, 4]"));
+  CHECK_THROWS_WITH(
+      th::dist::environment_from_env(),
+      Catch::Contains("environment variable LOCAL_WORLD_SIZE='abc' must be an integer in [1, 4]"));
   set("LOCAL_WORLD_SIZE", "5");
   CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("LOCAL_WORLD_SIZE='5'"));
   set("LOCAL_WORLD_SIZE", nullptr);
   set("RANK", " 3");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK=' 3' must be an integer"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(),
+                    Catch::Contains("environment variable RANK=' 3' must be an integer"));
   set("RANK", "4");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK='4' must be an integer in [0, 3]"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(),
+                    Catch::Contains("environment variable RANK='4' must be an integer in [0, 3]"));
   set("RANK", "x1");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("environment variable RANK='x1' must be an integer in [0, 3]"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(),
+                    Catch::Contains("environment variable RANK='x1' must be an integer in [0, 3]"));
   set("RANK", nullptr);
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), Catch::Contains("WORLD_SIZE is set (4) but RANK is not"));
+  CHECK_THROWS_WITH(th::dist::environment_from_env(),
+                    Catch::Contains("WORLD_SIZE is set (4) but RANK is not"));
   set("RANK", "0");
   set("MASTER_PORT", "70000");
-  CHECK_THROWS_WITH(th::dist::environment_from_env(), 
-                    Catch::Contains("environment variable MASTER_PORT='70000' must be an integer in [1, 65535]"));
+  CHECK_THROWS_WITH(
+      th::dist::environment_from_env(),
+      Catch::Contains("environment variable MASTER_PORT='70000' must be an integer in [1, 65535]"));
   for (const char* k : keys) set(k, nullptr);
   // NCCL is refused clearly where it cannot work.
-  CHECK_THROWS_WITH(th::dist::resolve_backend("nccl", torch::kCPU), 
-                    Catch::Contains("train.dist_backend=nccl but this LibTorch was built without NCCL") ||
-                        Catch::Contains("train.dist_backend=nccl needs device cuda"));
+  CHECK_THROWS_WITH(
+      th::dist::resolve_backend("nccl", torch::kCPU),
+      Catch::Contains("train.dist_backend=nccl but this LibTorch was built without NCCL") ||
+          Catch::Contains("train.dist_backend=nccl needs device cuda"));
   CHECK(th::dist::resolve_backend("auto", torch::kCPU) == "gloo");
 }
 
-TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulating both ranks' samples",
-          "[dist][slow]") {
+TEST_CASE(
+    "2 ranks train bit-identical weights, equal to one process accumulating both ranks' samples",
+    "[dist][slow]") {
   const int K = 3;
   const fs::path dir = th::test::scratch_dir("dist_two_ranks");
   // Each rank's BatchNorm on its own images: what one process accumulating the two samples one
   // after the other computes (synchronised BatchNorm has its own test below).
   const auto overrides = tiny_overrides({"train.sync_batchnorm=false"});
   // transhuman-train --nproc 2: the launcher starts both ranks.
-  const Process launcher = th::test::spawn(
-      train_command(dir / "run", {"--nproc", "2", "--max-steps", std::to_string(K), "--rank-state",
-                                  (dir / "ranks").string()},
-                    overrides),
-      {}, dir / "launcher.log");
+  const Process launcher =
+      th::test::spawn(train_command(dir / "run",
+                                    {"--nproc", "2", "--max-steps", std::to_string(K),
+                                     "--rank-state", (dir / "ranks").string()},
+                                    overrides),
+                      {}, dir / "launcher.log");
   const auto status = th::test::wait_for(launcher, 150);
   if (!status) th::test::kill_and_reap(launcher);
   INFO(th::test::read_text(dir / "launcher.log"));
@@ -221,7 +240,8 @@ TEST_CASE("2 ranks train bit-identical weights, equal to one process accumulatin
   REQUIRE(describe(*status) == "exit 0");
 
   const auto c = tiny_config({"train.sync_batchnorm=false"});
-  const State r0 = state_of(dir / "ranks" / "rank0.pt", c), r1 = state_of(dir / "ranks" / "rank1.pt", c);
+  const State r0 = state_of(dir / "ranks" / "rank0.pt", c),
+              r1 = state_of(dir / "ranks" / "rank1.pt", c);
   CHECK(r0.step == K);
   CHECK(r1.step == K);
   CHECK(count_differing(r0.params, r1.params) == 0);
@@ -264,7 +284,8 @@ torch::Tensor trunk_loss(th::model::ResNetTrunk& trunk, const torch::Tensor& ima
                          const std::vector<torch::Tensor>& weights) {
   const auto levels = trunk->forward(images);
   auto loss = torch::zeros({}, torch::kFloat64);
-  for (size_t l = 0; l < levels.size(); ++l) loss = loss + (levels[l].to(torch::kFloat64) * weights[l]).sum();
+  for (size_t l = 0; l < levels.size(); ++l)
+    loss = loss + (levels[l].to(torch::kFloat64) * weights[l]).sum();
   return loss;
 }
 
@@ -290,8 +311,10 @@ TrunkGrads trunk_grads(th::model::ResNetTrunk& trunk, const torch::Tensor& image
 
 }  // namespace
 
-TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one batch of both ranks' images",
-          "[dist]") {
+TEST_CASE(
+    "synchronised BatchNorm: 2 ranks give the loss and gradients of one batch of both ranks' "
+    "images",
+    "[dist]") {
   torch::set_num_threads(1);
   const int64_t V = 3;  // reference images per rank
   torch::manual_seed(7);
@@ -299,7 +322,8 @@ TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one ba
   th::model::ResNetTrunk probe(true);
   std::vector<torch::Tensor> weights;
   for (const auto& level : probe->forward(images.slice(0, 0, 1)))
-    weights.push_back(torch::randn({2 * V, level.size(1), level.size(2), level.size(3)}, torch::kFloat64));
+    weights.push_back(
+        torch::randn({2 * V, level.size(1), level.size(2), level.size(3)}, torch::kFloat64));
   auto make_trunk = [] {
     torch::manual_seed(11);
     th::model::ResNetTrunk t(true);
@@ -336,9 +360,11 @@ TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one ba
           // (Catch's assertions are not thread-safe: results are checked after the join.)
           if (sync)
             layers[size_t(r)] = th::model::synchronise_batchnorm(
-                *trunk, std::make_shared<const th::model::StatsReducer>(
-                            [&comm](torch::Tensor& t) { comm.sum_in_place(t, "test statistics"); }));
-          out[size_t(r)] = trunk_grads(trunk, images.slice(0, r * V, (r + 1) * V), slice(weights, r));
+                *trunk, std::make_shared<const th::model::StatsReducer>([&comm](torch::Tensor& t) {
+                  comm.sum_in_place(t, "test statistics");
+                }));
+          out[size_t(r)] =
+              trunk_grads(trunk, images.slice(0, r * V, (r + 1) * V), slice(weights, r));
           comm.barrier("the end of the test");
         } catch (const std::exception& e) {
           errors[size_t(r)] = e.what();
@@ -353,7 +379,8 @@ TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one ba
   // The largest difference from the single batch: loss, parameter gradients (summed over the
   // ranks, as the gradient all-reduce does), input gradients, running statistics.
   auto difference = [&](const std::vector<TrunkGrads>& ranks) {
-    double d = std::abs(ranks[0].loss + ranks[1].loss - single.loss) / std::max(1.0, std::abs(single.loss));
+    double d = std::abs(ranks[0].loss + ranks[1].loss - single.loss) /
+               std::max(1.0, std::abs(single.loss));
     for (const auto& [name, g] : single.params) {
       const auto sum = ranks[0].params.at(name) + ranks[1].params.at(name);
       d = std::max(d, ((sum - g).abs().max() / g.abs().max().clamp_min(1e-12)).item<double>());
@@ -362,7 +389,8 @@ TEST_CASE("synchronised BatchNorm: 2 ranks give the loss and gradients of one ba
     d = std::max(d, ((input - single.input).abs().max() / single.input.abs().max()).item<double>());
     for (const auto& [name, b] : single.buffers)
       for (const auto& rank : ranks)
-        d = std::max(d, ((rank.buffers.at(name) - b).abs().max() / b.abs().max().clamp_min(1e-12)).item<double>());
+        d = std::max(d, ((rank.buffers.at(name) - b).abs().max() / b.abs().max().clamp_min(1e-12))
+                            .item<double>());
     return d;
   };
   const double synced = difference(on_ranks(true));
@@ -379,8 +407,10 @@ TEST_CASE("a killed rank makes the other exit with an error within the timeout, 
   const double timeout = 10;
   const fs::path dir = th::test::scratch_dir("dist_kill");
   const int port = th::dist::free_port();
-  const auto args = train_command(dir / "run", {}, tiny_overrides({"train.epochs=1000", "train.save_every_epochs=1",
-                                                                   "train.dist_timeout_s=" + std::to_string(timeout)}));
+  const auto args =
+      train_command(dir / "run", {},
+                    tiny_overrides({"train.epochs=1000", "train.save_every_epochs=1",
+                                    "train.dist_timeout_s=" + std::to_string(timeout)}));
   const Process r0 = start_rank(0, 2, port, args, dir / "rank0.log");
   const Process r1 = start_rank(1, 2, port, args, dir / "rank1.log");
   const bool trained = wait_for_file(dir / "run" / "checkpoints" / "epoch_0001.pt", r0, 120);
@@ -422,8 +452,9 @@ TEST_CASE("a hung rank makes the other exit with an error within the timeout", "
   const double timeout = 5;
   const fs::path dir = th::test::scratch_dir("dist_hang");
   const int port = th::dist::free_port();
-  const auto args = train_command(dir / "run", {}, tiny_overrides({"train.epochs=1000",
-                                                                   "train.dist_timeout_s=" + std::to_string(timeout)}));
+  const auto args = train_command(
+      dir / "run", {},
+      tiny_overrides({"train.epochs=1000", "train.dist_timeout_s=" + std::to_string(timeout)}));
   const Process r0 = start_rank(0, 2, port, args, dir / "rank0.log");
   const Process r1 = start_rank(1, 2, port, args, dir / "rank1.log");
   const bool training = wait_for_file(dir / "run" / "metrics.jsonl", r0, 120);
@@ -488,12 +519,15 @@ bool all_gone(const std::vector<pid_t>& pids, double seconds) {
 
 }  // namespace
 
-TEST_CASE("a stop signal to the --nproc launcher reaches every rank, and ranks die with a killed launcher",
-          "[dist][slow]") {
+TEST_CASE(
+    "a stop signal to the --nproc launcher reaches every rank, and ranks die with a killed "
+    "launcher",
+    "[dist][slow]") {
   for (const int sig : {SIGTERM, SIGKILL}) {
     CAPTURE(sig);
     const fs::path dir = th::test::scratch_dir("dist_launcher_signal_" + std::to_string(sig));
-    const auto args = train_command(dir / "run", {"--nproc", "2"}, tiny_overrides({"train.epochs=1000"}));
+    const auto args =
+        train_command(dir / "run", {"--nproc", "2"}, tiny_overrides({"train.epochs=1000"}));
     const Process launcher = th::test::spawn(args, {}, dir / "launcher.log");
     const bool training = wait_for_file(dir / "run" / "metrics.jsonl", launcher, 120);
     const auto ranks = children_of(launcher.pid);
@@ -515,8 +549,10 @@ TEST_CASE("a stop signal to the --nproc launcher reaches every rank, and ranks d
     if (sig == SIGTERM) {
       // The launcher waited for its ranks and says why it stopped.
       CHECK(describe(*status) == "exit " + std::to_string(128 + SIGTERM));
-      CHECK_THAT(th::test::read_text(dir / "launcher.log"),
-                 Catch::Contains("launcher: Terminated: passing it to the 2 running rank(s) and waiting for them"));
+      CHECK_THAT(
+          th::test::read_text(dir / "launcher.log"),
+          Catch::Contains(
+              "launcher: Terminated: passing it to the 2 running rank(s) and waiting for them"));
     } else {
       CHECK(describe(*status) == "signal " + std::to_string(SIGKILL));
     }

@@ -1,16 +1,15 @@
 #include <catch2/catch.hpp>
-
 #include <fstream>
 #include <sstream>
 
 #include "body/grouping.hpp"
 #include "body/smpl.hpp"
 #include "data/dataset.hpp"
+#include "eval/evaluator.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
-#include "eval/evaluator.hpp"
-#include "train/trainer.hpp"
 #include "support/test_env.hpp"
+#include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
 
@@ -38,12 +37,15 @@ std::string scores_of(const fs::path& csv) {
 
 }  // namespace
 
-TEST_CASE("a checkpoint evaluates with its own token groups: no k-means cache, another seed", "[eval][tokens]") {
+TEST_CASE("a checkpoint evaluates with its own token groups: no k-means cache, another seed",
+          "[eval][tokens]") {
   const auto root = th::test::tiny_dataset();
   const fs::path run = th::test::scratch_dir("eval_token_groups");
   auto config = [&](const fs::path& cache, std::vector<std::string> more) {
-    more.insert(more.end(), {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
-                             "model.grouping.cache_dir=" + cache.string(), "train.val_views=0", "eval.limit=3"});
+    more.insert(
+        more.end(),
+        {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+         "model.grouping.cache_dir=" + cache.string(), "train.val_views=0", "eval.limit=3"});
     return th::config::load<th::Config>("tests/configs/tiny_train.yaml", more);
   };
   const auto c = config(run / "cache", {});
@@ -53,8 +55,9 @@ TEST_CASE("a checkpoint evaluates with its own token groups: no k-means cache, a
   // An empty cache and another seed: without warn, refused by name.
   const fs::path empty_cache = run / "empty_cache";
   const auto other = config(empty_cache, {"model.grouping.seed=5"});
-  CHECK_THROWS_WITH(th::eval::evaluate(other, torch::kCPU, trained.checkpoint, run / "eval_refused"),
-                    Catch::Contains("model.grouping.seed: checkpoint 0, config 5"));
+  CHECK_THROWS_WITH(
+      th::eval::evaluate(other, torch::kCPU, trained.checkpoint, run / "eval_refused"),
+      Catch::Contains("model.grouping.seed: checkpoint 0, config 5"));
   // With warn: the checkpoint's groups, so the same rows; the k-means never ran.
   const auto warned = config(empty_cache, {"model.grouping.seed=5", "eval.model_mismatch=warn"});
   th::eval::evaluate(warned, torch::kCPU, trained.checkpoint, run / "eval_b");
@@ -97,12 +100,14 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
   CHECK(fs::exists(run / "eval_a" / "summary.json"));
   CHECK_THAT(read_all(run / "eval_a" / "results.md"), Catch::Contains("| identity | 3 |"));
   size_t panels = 0;
-  for (const auto& e : fs::directory_iterator(run / "eval_a" / "images")) panels += e.path().extension() == ".png";
+  for (const auto& e : fs::directory_iterator(run / "eval_a" / "images"))
+    panels += e.path().extension() == ".png";
   CHECK(panels == 3);
 
   // per_image.csv's point counts against an independent count: every sample of every in-box
   // ray (points), and those farther than render.cull_distance from all body vertices (culled).
-  const th::data::Dataset ds(c.data, "identity", th::data::Dataset::Mode::Test, th::data::load_body_model(c.data));
+  const th::data::Dataset ds(c.data, "identity", th::data::Dataset::Mode::Test,
+                             th::data::load_body_model(c.data));
   std::stringstream rows(csv_a);
   std::string line;
   std::getline(rows, line);
@@ -116,13 +121,17 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
     INFO(line);
     for (size_t i = 0; i < ds.size(); ++i) {
       const auto s = ds.load(i, 0);
-      if (s.human != f[0] || s.frame != std::stoi(f[1]) || s.target_view != std::stoi(f[2])) continue;
+      if (s.human != f[0] || s.frame != std::stoi(f[1]) || s.target_view != std::stoi(f[2]))
+        continue;
       const int64_t S = c.render.samples;
       const auto t = torch::linspace(0, 1, S, torch::kFloat64);
-      const auto near = s.near.to(torch::kFloat64).unsqueeze(1), far = s.far.to(torch::kFloat64).unsqueeze(1);
+      const auto near = s.near.to(torch::kFloat64).unsqueeze(1),
+                 far = s.far.to(torch::kFloat64).unsqueeze(1);
       const auto z = near * (1 - t) + far * t;  // (R, S)
-      const auto pts = s.ray_o.to(torch::kFloat64).unsqueeze(1) + s.ray_d.to(torch::kFloat64).unsqueeze(1) * z.unsqueeze(2);
-      const auto d = std::get<0>(torch::cdist(pts.reshape({-1, 3}), s.body.vertices.to(torch::kFloat64)).min(1));
+      const auto pts = s.ray_o.to(torch::kFloat64).unsqueeze(1) +
+                       s.ray_d.to(torch::kFloat64).unsqueeze(1) * z.unsqueeze(2);
+      const auto d = std::get<0>(
+          torch::cdist(pts.reshape({-1, 3}), s.body.vertices.to(torch::kFloat64)).min(1));
       const int64_t points = s.ray_o.size(0) * S;
       const int64_t culled = (d > c.render.cull_distance).sum().item<int64_t>();
       const int64_t borderline = ((d - c.render.cull_distance).abs() < 1e-5).sum().item<int64_t>();

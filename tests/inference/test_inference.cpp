@@ -1,9 +1,8 @@
 // Free-viewpoint rendering and mesh extraction from a (briefly trained) tiny checkpoint.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
-
 #include <unistd.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 
 #include "body/smpl.hpp"
@@ -12,10 +11,10 @@
 #include "inference/free_view.hpp"
 #include "inference/mesh_extraction.hpp"
 #include "mesh/ply.hpp"
-#include "support/test_env.hpp"
-#include "pipeline/pipeline.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
+#include "pipeline/pipeline.hpp"
+#include "support/test_env.hpp"
 #include "train/trainer.hpp"
 #include "video/camera_path.hpp"
 
@@ -52,7 +51,8 @@ TEST_CASE("frame ranges: F, BEGIN:END, BEGIN:END:STEP, errors quote the text", "
   CHECK(parse_frame_range("0:4") == std::vector<int>{0, 1, 2, 3});
   CHECK(parse_frame_range("2:9:3") == std::vector<int>{2, 5, 8});
   for (const char* bad : {"", "a", "1:", "3:3", "0:4:0", "1:2:3:4", "1.5"})
-    CHECK_THROWS_WITH(parse_frame_range(bad), Catch::Contains("frame range '" + std::string(bad) + "'"));
+    CHECK_THROWS_WITH(parse_frame_range(bad),
+                      Catch::Contains("frame range '" + std::string(bad) + "'"));
 }
 
 TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", "[inference]") {
@@ -63,20 +63,23 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   const auto prepared = session.prepare(h, frame, 5);
   const auto camera = session.dataset_camera(prepared, 5);
   const auto& s = prepared.sample;
-  const auto image = session.render(prepared, camera, int(s.target_image.size(1)), int(s.target_image.size(0)));
+  const auto image =
+      session.render(prepared, camera, int(s.target_image.size(1)), int(s.target_image.size(0)));
 
   // transhuman-eval's path: the same sample through evaluate_view.
   th::model::TransHuman model(config.model);
   th::pipeline::load_weights(*model, tiny_checkpoint());
   model->eval();
-  model->set_products(th::model::resolve_products(config.precision, config.fp32_products, torch::kCPU));
+  model->set_products(
+      th::model::resolve_products(config.precision, config.fp32_products, torch::kCPU));
   const auto smpl = th::data::load_body_model(config.data);
   th::pipeline::Tokens tokens(*model, smpl->v_template);
-  const auto inputs = th::pipeline::frame_inputs(s, smpl->v_template,
-                                              tokens.labels(s.body), torch::kCPU);
+  const auto inputs =
+      th::pipeline::frame_inputs(s, smpl->v_template, tokens.labels(s.body), torch::kCPU);
   // Token positions come from v_template in float64, as the reference's do (METHOD 3.2 [parity]).
   CHECK(prepared.inputs.canonical.scalar_type() == torch::kDouble);
-  const auto expected = th::pipeline::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
+  const auto expected =
+      th::pipeline::evaluate_view(*model, config.render, s, inputs, nullptr, torch::kCPU);
   CHECK(torch::equal(image, expected.pred));
   CHECK(image.max().item<float>() > 0);  // not an all-black comparison
 
@@ -86,8 +89,9 @@ TEST_CASE("a dataset camera renders the image evaluation renders, bit for bit", 
   CHECK((banded - image).abs().max().item<float>() <= 1e-6f);
 }
 
-TEST_CASE("too large renders and too fine mesh grids are refused before any work, with the estimate",
-          "[inference]") {
+TEST_CASE(
+    "too large renders and too fine mesh grids are refused before any work, with the estimate",
+    "[inference]") {
   auto config = tiny_config();
   config.max_memory_gb = 1;
   const th::inference::Session session(config, torch::kCPU, tiny_checkpoint());
@@ -100,14 +104,15 @@ TEST_CASE("too large renders and too fine mesh grids are refused before any work
   CHECK(!fs::exists(out / "mesh"));
   mesh.voxel = 0.01;
   mesh.threshold = -1;
-  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"), 
+  CHECK_THROWS_WITH(th::inference::extract_mesh(session, mesh, out / "mesh"),
                     Catch::Contains("mesh threshold must be a finite number >= 0, got -1"));
 
   VideoRequest r;
   r.width = 20000;
   r.height = 20000;
-  CHECK_THROWS_WITH(th::inference::render_video(session, r, out / "video"),
-                    Catch::Contains("render 20000 x 20000 x 36 frames") && Catch::Contains("max_memory_gb"));
+  CHECK_THROWS_WITH(
+      th::inference::render_video(session, r, out / "video"),
+      Catch::Contains("render 20000 x 20000 x 36 frames") && Catch::Contains("max_memory_gb"));
   CHECK(!fs::exists(out / "video" / "frames"));
 }
 
@@ -123,7 +128,8 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, r
   const auto first = th::inference::render_video(session, request, out);
   CHECK(first.frames == 3);
   CHECK(first.rendered == 3);
-  for (int k = 0; k < 3; ++k) CHECK(fs::exists(out / "frames" / ("frame_000" + std::to_string(k) + ".png")));
+  for (int k = 0; k < 3; ++k)
+    CHECK(fs::exists(out / "frames" / ("frame_000" + std::to_string(k) + ".png")));
   CHECK(fs::exists(out / "contact_sheet.png"));
   if (first.video_written) CHECK(fs::file_size(out / "video.mp4") > 0);
   const auto path = th::video::read_camera_path(out / "cameras.yaml");
@@ -139,8 +145,9 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, r
 
   // Another request into the same folder is refused, then forced.
   request.orbit_views = 4;
-  CHECK_THROWS_WITH(th::inference::render_video(session, request, out),
-                    Catch::Contains("holds frames of another request") && Catch::Contains("--force"));
+  CHECK_THROWS_WITH(
+      th::inference::render_video(session, request, out),
+      Catch::Contains("holds frames of another request") && Catch::Contains("--force"));
   request.force = true;
   CHECK(th::inference::render_video(session, request, out).rendered == 4);
   // Other weights, same request: the frames are not theirs.
@@ -160,8 +167,10 @@ TEST_CASE("an orbit over a frame range: frames, video, cameras, contact sheet, r
   CHECK(th::inference::render_video(session, replay, out2).rendered == 4);
   for (int k = 0; k < 4; ++k) {
     const auto name = "frame_000" + std::to_string(k) + ".png";
-    std::ifstream a(out / "frames" / name, std::ios::binary), b(out2 / "frames" / name, std::ios::binary);
-    const std::string sa((std::istreambuf_iterator<char>(a)), {}), sb((std::istreambuf_iterator<char>(b)), {});
+    std::ifstream a(out / "frames" / name, std::ios::binary),
+        b(out2 / "frames" / name, std::ios::binary);
+    const std::string sa((std::istreambuf_iterator<char>(a)), {}),
+        sb((std::istreambuf_iterator<char>(b)), {});
     CHECK(sa == sb);
   }
 }
@@ -239,8 +248,9 @@ TEST_CASE("bad render requests name the person, frame or camera", "[inference][v
   CHECK_THROWS_WITH(th::inference::render_video(session, r, out), Catch::Contains("camera 99"));
 }
 
-TEST_CASE("mesh of a frame: closed, inside the box, density culled away from the body, PLY and preview",
-          "[inference][mesh]") {
+TEST_CASE(
+    "mesh of a frame: closed, inside the box, density culled away from the body, PLY and preview",
+    "[inference][mesh]") {
   const th::inference::Session session(tiny_config(), torch::kCPU, tiny_checkpoint());
   const int h = session.find_human("");
   const auto prepared = session.prepare(h, 0, 3);

@@ -75,10 +75,13 @@ TEST_CASE("npy_bytes is byte-identical to np.save for every writable dtype") {
   const fs::path dir = io_fixtures();
   for (const auto& code : kWritable) {
     INFO(code);
-    CHECK(byte_difference(io::npy_bytes(dtype_values(code)), read_bytes(dir / ("dtype_" + code + "_le_C.npy"))) == "");
+    CHECK(byte_difference(io::npy_bytes(dtype_values(code)),
+                          read_bytes(dir / ("dtype_" + code + "_le_C.npy"))) == "");
   }
-  CHECK(byte_difference(io::npy_bytes(torch::scalar_tensor(2.5, torch::kDouble)), read_bytes(dir / "scalar.npy")) == "");
-  CHECK(byte_difference(io::npy_bytes(torch::zeros({0, 3}, torch::kFloat)), read_bytes(dir / "empty.npy")) == "");
+  CHECK(byte_difference(io::npy_bytes(torch::scalar_tensor(2.5, torch::kDouble)),
+                        read_bytes(dir / "scalar.npy")) == "");
+  CHECK(byte_difference(io::npy_bytes(torch::zeros({0, 3}, torch::kFloat)),
+                        read_bytes(dir / "empty.npy")) == "");
 }
 
 TEST_CASE("write_npy files are byte-identical to np.save and numpy's copies read back equal") {
@@ -102,7 +105,8 @@ TEST_CASE("write_npy_value writes annots and params byte-identical to np.save of
   // numpy -> C++ -> bytes: re-writing what was read gives numpy's file back.
   for (const char* name : {"annots.npy", "params.npy"}) {
     INFO(name);
-    CHECK(byte_difference(io::npy_value_bytes(io::read_npy_value(fixtures / name)), read_bytes(fixtures / name)) == "");
+    CHECK(byte_difference(io::npy_value_bytes(io::read_npy_value(fixtures / name)),
+                          read_bytes(fixtures / name)) == "");
   }
   // C++ -> numpy -> C++.
   const fs::path dir = scratch_dir("io_write_npy_value");
@@ -114,7 +118,8 @@ TEST_CASE("write_npy_value writes annots and params byte-identical to np.save of
 }
 
 TEST_CASE("write_npy_value of an array writes a numeric .npy") {
-  CHECK(byte_difference(io::npy_value_bytes(Value::array(dtype_values("f4"))), io::npy_bytes(dtype_values("f4"))) == "");
+  CHECK(byte_difference(io::npy_value_bytes(Value::array(dtype_values("f4"))),
+                        io::npy_bytes(dtype_values("f4"))) == "");
 }
 
 TEST_CASE("read_npz reads np.savez (stored) and np.savez_compressed (deflate) archives") {

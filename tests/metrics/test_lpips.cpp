@@ -7,7 +7,8 @@
 
 using namespace th::metrics;
 
-TEST_CASE("LPIPS equals the Python formula on torchvision's VGG16 with random weights", "[lpips][python]") {
+TEST_CASE("LPIPS equals the Python formula on torchvision's VGG16 with random weights",
+          "[lpips][python]") {
   const auto dir = th::test::scratch_dir("lpips_reference");
   REQUIRE(th::test::run_python("tests/python/lpips_reference.py", dir.string()) == 0);
   Lpips lpips;
@@ -29,7 +30,8 @@ TEST_CASE("LPIPS weights with a missing or mis-shaped key fail naming it", "[lpi
   CHECK_THROWS_WITH(lpips->load(dir / "partial.npz"), Catch::Contains("features.0.bias"));
   arrays["features.0.weight"] = torch::zeros({64, 3, 5, 5});
   th::io::write_npz(dir / "shape.npz", arrays);
-  CHECK_THROWS_WITH(lpips->load(dir / "shape.npz"), Catch::Contains("'features.0.weight' has shape"));
+  CHECK_THROWS_WITH(lpips->load(dir / "shape.npz"),
+                    Catch::Contains("'features.0.weight' has shape"));
   CHECK(try_load_lpips("", torch::kCPU, "the LPIPS metric") == nullptr);
   CHECK(try_load_lpips((dir / "nope.npz").string(), torch::kCPU, "the LPIPS metric") == nullptr);
 }

@@ -1,5 +1,4 @@
 #include <catch2/catch.hpp>
-
 #include <fstream>
 
 #include "metrics/metrics.hpp"
@@ -7,7 +6,8 @@
 
 using namespace th::metrics;
 
-TEST_CASE("SSIM and PSNR equal scikit-image and numpy on random images and crops", "[metrics][python]") {
+TEST_CASE("SSIM and PSNR equal scikit-image and numpy on random images and crops",
+          "[metrics][python]") {
   const auto dir = th::test::scratch_dir("ssim_skimage");
   torch::manual_seed(11);
   std::vector<std::pair<torch::Tensor, torch::Tensor>> pairs;
@@ -44,7 +44,8 @@ TEST_CASE("SSIM of an image with itself is 1 and drops with noise", "[metrics]")
   CHECK(ssim(a, (a + 0.2 * torch::randn_like(a)).clamp(0, 1)) < 0.95);
 }
 
-TEST_CASE("the protocol crop blacks out invalid pixels and keeps the bounding rectangle", "[metrics]") {
+TEST_CASE("the protocol crop blacks out invalid pixels and keeps the bounding rectangle",
+          "[metrics]") {
   auto img = torch::ones({10, 12, 3});
   auto valid = torch::zeros({10, 12}, torch::kBool);
   valid.index_put_({torch::indexing::Slice(2, 5), torch::indexing::Slice(3, 9)}, true);

@@ -13,21 +13,23 @@
 #include <vector>
 
 #include "core/config.hpp"
-#include "support/test_env.hpp"
 #include "model/inputs.hpp"
 #include "render/volume.hpp"
+#include "support/test_env.hpp"
 
 namespace th::test {
 
 inline torch::Tensor rotation_y(double a) {
-  return torch::tensor({std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)},
-                       torch::kDouble)
+  return torch::tensor(
+             {std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)},
+             torch::kDouble)
       .view({3, 3});
 }
 
 inline torch::Tensor rotation_x(double a) {
-  return torch::tensor({1.0, 0.0, 0.0, 0.0, std::cos(a), -std::sin(a), 0.0, std::sin(a), std::cos(a)},
-                       torch::kDouble)
+  return torch::tensor(
+             {1.0, 0.0, 0.0, 0.0, std::cos(a), -std::sin(a), 0.0, std::sin(a), std::cos(a)},
+             torch::kDouble)
       .view({3, 3});
 }
 
@@ -38,8 +40,8 @@ struct SyntheticFrame {
 };
 
 // nv vertices, nt tokens, V reference views of size x size pixels.
-inline SyntheticFrame synthetic_frame(int64_t nv = 300, int64_t nt = 24, int64_t V = 3, int64_t size = 32,
-                                      uint64_t seed = 0) {
+inline SyntheticFrame synthetic_frame(int64_t nv = 300, int64_t nt = 24, int64_t V = 3,
+                                      int64_t size = 32, uint64_t seed = 0) {
   torch::manual_seed(seed);
   SyntheticFrame f;
   f.size = size;
@@ -51,7 +53,8 @@ inline SyntheticFrame synthetic_frame(int64_t nv = 300, int64_t nt = 24, int64_t
   in.canonical = canonical;
   // Posed: a small deformation; A: rotations near identity, blended (not orthonormal).
   const auto xs = canonical + 0.02 * torch::randn({nv, 3}, torch::kDouble);
-  in.A = (torch::eye(3, torch::kDouble).expand({nv, 3, 3}) + 0.1 * torch::randn({nv, 3, 3}, torch::kDouble))
+  in.A = (torch::eye(3, torch::kDouble).expand({nv, 3, 3}) +
+          0.1 * torch::randn({nv, 3, 3}, torch::kDouble))
              .to(torch::kFloat);
   const auto Rh = torch::mm(rotation_y(0.3), rotation_x(0.1));
   const auto Th = torch::tensor({0.1, -0.05, 0.2}, torch::kDouble);
@@ -64,7 +67,9 @@ inline SyntheticFrame synthetic_frame(int64_t nv = 300, int64_t nt = 24, int64_t
   in.num_tokens = nt;
   // Cameras on a circle of radius 3 m around the body, looking at it.
   const double focal = size * 1.4;
-  auto K = torch::tensor({focal, 0.0, size / 2.0, 0.0, focal, size / 2.0, 0.0, 0.0, 1.0}, torch::kDouble).view({3, 3});
+  auto K =
+      torch::tensor({focal, 0.0, size / 2.0, 0.0, focal, size / 2.0, 0.0, 0.0, 1.0}, torch::kDouble)
+          .view({3, 3});
   std::vector<torch::Tensor> Ks, Rs, Ts;
   for (int64_t v = 0; v <= V; ++v) {
     const auto R = rotation_y(2 * M_PI * v / (V + 1) + 0.2);
@@ -95,7 +100,8 @@ inline render::Rays target_rays(const SyntheticFrame& f, int64_t s) {
   const auto o = -torch::mv(R.t(), T.flatten());
   const auto ys = torch::arange(s, torch::kDouble), xs = torch::arange(s, torch::kDouble);
   const auto grid = torch::meshgrid({ys, xs}, "ij");
-  const auto pix = torch::stack({grid[1].flatten(), grid[0].flatten(), torch::ones({s * s}, torch::kDouble)}, 1);
+  const auto pix =
+      torch::stack({grid[1].flatten(), grid[0].flatten(), torch::ones({s * s}, torch::kDouble)}, 1);
   const auto d = torch::mm(torch::mm(pix, torch::inverse(Ks).t()), R);  // R^T K^-1 [x y 1]
   const auto v = f.inputs.vertices.to(torch::kDouble);
   const auto lo = std::get<0>(v.min(0)) - 0.1, hi = std::get<0>(v.max(0)) + 0.1;
@@ -145,7 +151,8 @@ inline void write_raw(const std::string& path, const torch::Tensor& t) {
   f.write(static_cast<const char*>(c.data_ptr()), c.numel() * c.element_size());
 }
 
-inline torch::Tensor read_raw(const std::string& path, torch::IntArrayRef shape, torch::ScalarType dtype) {
+inline torch::Tensor read_raw(const std::string& path, torch::IntArrayRef shape,
+                              torch::ScalarType dtype) {
   auto t = torch::empty(shape, dtype);
   std::ifstream f(path, std::ios::binary);
   f.read(static_cast<char*>(t.data_ptr()), t.numel() * t.element_size());
@@ -161,8 +168,11 @@ class PythonReference {
 
   void add(const std::string& name, const torch::Tensor& t) {
     const auto c = t.detach().cpu().contiguous();
-    const char* dt = c.scalar_type() == torch::kFloat ? "f32" : c.scalar_type() == torch::kDouble ? "f64" : "i64";
-    TORCH_CHECK(c.scalar_type() == torch::kFloat || c.scalar_type() == torch::kDouble || c.scalar_type() == torch::kLong,
+    const char* dt = c.scalar_type() == torch::kFloat    ? "f32"
+                     : c.scalar_type() == torch::kDouble ? "f64"
+                                                         : "i64";
+    TORCH_CHECK(c.scalar_type() == torch::kFloat || c.scalar_type() == torch::kDouble ||
+                    c.scalar_type() == torch::kLong,
                 "unsupported dtype for ", name);
     write_raw((dir_ / (name + ".bin")).string(), c);
     manifest_ += name + " " + dt;

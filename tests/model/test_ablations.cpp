@@ -1,6 +1,7 @@
 // Every ablation of the paper as configuration: builds, trains one step, renders one image.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+
+#include <catch2/catch.hpp>
 
 #include "core/error.hpp"
 #include "model/frame_fixture.hpp"
@@ -79,40 +80,62 @@ TEST_CASE("every ablation builds, trains one step and renders one image", "[mode
   std::vector<Ablation> ablations = {
       {"default", [](ModelConfig&, RenderConfig&) {}},
       {"observation-space grouping and PE",
-       [](ModelConfig& c, RenderConfig&) { c.grouping.kind = GroupingKind::observation_grid, c.transhe.position = TokenPosition::observation; },
-       [](FrameInputs& in) { in.labels = grid_labels(in.vertices, 0.12); in.num_tokens = in.labels.max().item<int64_t>() + 1; }},
-      {"observation PE only", [](ModelConfig& c, RenderConfig&) { c.transhe.position = TokenPosition::observation; }},
+       [](ModelConfig& c, RenderConfig&) {
+         c.grouping.kind = GroupingKind::observation_grid,
+         c.transhe.position = TokenPosition::observation;
+       },
+       [](FrameInputs& in) {
+         in.labels = grid_labels(in.vertices, 0.12);
+         in.num_tokens = in.labels.max().item<int64_t>() + 1;
+       }},
+      {"observation PE only",
+       [](ModelConfig& c, RenderConfig&) { c.transhe.position = TokenPosition::observation; }},
       {"canonical grid",
        [](ModelConfig& c, RenderConfig&) { c.grouping.kind = GroupingKind::canonical_grid; },
-       [](FrameInputs& in) { in.labels = grid_labels(in.canonical, 0.12); in.num_tokens = in.labels.max().item<int64_t>() + 1; }},
+       [](FrameInputs& in) {
+         in.labels = grid_labels(in.canonical, 0.12);
+         in.num_tokens = in.labels.max().item<int64_t>() + 1;
+       }},
       {"Nt 100", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 100},
       {"Nt 300", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 300},
       {"Nt 500", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 500},
       {"Nt 1000", [](ModelConfig&, RenderConfig&) {}, nullptr, 1200, 1000},
       {"w/o transformer", [](ModelConfig& c, RenderConfig&) { c.transhe.enabled = false; }},
-      {"coordinate none", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::none; }},
-      {"coordinate absolute", [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::absolute; }},
+      {"coordinate none",
+       [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::none; }},
+      {"coordinate absolute",
+       [](ModelConfig& c, RenderConfig&) { c.dparf.coordinate = Coordinate::absolute; }},
       {"FDI w/o a", [](ModelConfig& c, RenderConfig&) { c.fdi.appearance = false; }},
       {"FDI w/o h", [](ModelConfig& c, RenderConfig&) { c.fdi.human = false; }},
       {"FDI w/o RGB", [](ModelConfig& c, RenderConfig&) { c.fdi.raw_rgb = false; }},
       {"SPC + trilinear",
-       [](ModelConfig& c, RenderConfig&) { c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.05, c.spc.channels = 16; }},
+       [](ModelConfig& c, RenderConfig&) {
+         c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.05,
+         c.spc.channels = 16;
+       }},
       {"16 samples", [](ModelConfig&, RenderConfig& r) { r.samples = 16; }},
       {"training skips far points, full (non-progressive) inference",
-       [](ModelConfig&, RenderConfig& r) { r.progressive = false, r.train_chunk_points = 256; }, nullptr, 300, 24, true},
+       [](ModelConfig&, RenderConfig& r) { r.progressive = false, r.train_chunk_points = 256; },
+       nullptr, 300, 24, true},
       {"fused PE rounding, running BatchNorm statistics",
-       [](ModelConfig& c, RenderConfig&) { c.transhe.pe_rounding = PeRounding::fused, c.encoder.batchnorm = BatchNormStats::running; }},
+       [](ModelConfig& c, RenderConfig&) {
+         c.transhe.pe_rounding = PeRounding::fused, c.encoder.batchnorm = BatchNormStats::running;
+       }},
       {"direct computation (no shortcuts)",
-       [](ModelConfig& c, RenderConfig&) { c.exact_shortcuts = false, c.encoder.fast_sampling = false; }},
+       [](ModelConfig& c, RenderConfig&) {
+         c.exact_shortcuts = false, c.encoder.fast_sampling = false;
+       }},
   };
   for (int nk = 1; nk <= 9; ++nk)
-    ablations.push_back({"Nk " + std::to_string(nk), [nk](ModelConfig& c, RenderConfig&) { c.dparf.nk = nk; }});
+    ablations.push_back(
+        {"Nk " + std::to_string(nk), [nk](ModelConfig& c, RenderConfig&) { c.dparf.nk = nk; }});
   for (const auto& ab : ablations) {
     DYNAMIC_SECTION(ab.name) { train_step_and_render(ab); }
   }
 }
 
-TEST_CASE("configurations combining incompatible switches are refused with a reason", "[model][ablations]") {
+TEST_CASE("configurations combining incompatible switches are refused with a reason",
+          "[model][ablations]") {
   auto refused = [](std::function<void(ModelConfig&)> f) {
     ModelConfig c;
     f(c);
@@ -123,19 +146,26 @@ TEST_CASE("configurations combining incompatible switches are refused with a rea
     }
     return std::string();
   };
-  CHECK_THAT(refused([](ModelConfig& c) { c.fdi.appearance = false, c.fdi.human = false; }),
-             Catch::Contains("config key 'model.fdi' = {appearance: false, human: false}: at least one of the two "
-                             "branches must stay on"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.representation = Representation::spc_trilinear, c.fdi.human = false; }),
+  CHECK_THAT(
+      refused([](ModelConfig& c) { c.fdi.appearance = false, c.fdi.human = false; }),
+      Catch::Contains(
+          "config key 'model.fdi' = {appearance: false, human: false}: at least one of the two "
+          "branches must stay on"));
+  CHECK_THAT(refused([](ModelConfig& c) {
+               c.representation = Representation::spc_trilinear, c.fdi.human = false;
+             }),
              Catch::Contains("config key 'model.fdi.human' = false: the SPC + trilinear baseline"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = GroupingKind::observation_grid; }), 
-             Catch::Contains("config key 'model.transhe.position' = canonical: observation-space grouping"));
-  CHECK_THAT(refused([](ModelConfig& c) { c.dparf.nk = 0; }), 
-             Catch::Contains("config key 'model.dparf.nk' = 0: must be between 1 and grouping.num_tokens"));
+  CHECK_THAT(refused([](ModelConfig& c) { c.grouping.kind = GroupingKind::observation_grid; }),
+             Catch::Contains(
+                 "config key 'model.transhe.position' = canonical: observation-space grouping"));
+  CHECK_THAT(refused([](ModelConfig& c) { c.dparf.nk = 0; }),
+             Catch::Contains(
+                 "config key 'model.dparf.nk' = 0: must be between 1 and grouping.num_tokens"));
   CHECK(refused([](ModelConfig&) {}).empty());
 }
 
-TEST_CASE("a frame with fewer non-empty tokens than Nk is refused naming the setting", "[model][ablations]") {
+TEST_CASE("a frame with fewer non-empty tokens than Nk is refused naming the setting",
+          "[model][ablations]") {
   auto cfg = test::tiny_model_config();
   cfg.dparf.nk = 9;
   auto frame = test::synthetic_frame(300, 24);

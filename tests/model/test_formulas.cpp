@@ -1,7 +1,8 @@
 // Formulas of METHOD 3 and 4 against independent values from tests/python/model_reference.py
 // (numpy, torchvision, and the reference code's torch idioms).
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+
+#include <catch2/catch.hpp>
 
 #include "model/dparf.hpp"
 #include "model/encoder.hpp"
@@ -16,7 +17,9 @@ using namespace th;
 using namespace th::model;
 
 namespace {
-double max_abs(const torch::Tensor& a, const torch::Tensor& b) { return (a - b).abs().max().item<double>(); }
+double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
+  return (a - b).abs().max().item<double>();
+}
 }  // namespace
 
 TEST_CASE("positional encodings: layout and float32 values match numpy", "[model][formulas]") {
@@ -42,13 +45,16 @@ TEST_CASE("positional encodings: layout and float32 values match numpy", "[model
   // Low frequencies are the same either way: layout check [sin x, sin y, sin z, cos x, ...].
   CHECK(pe32[0][0].item<double>() == Approx(std::sin(M_PI * x[0][0].item<double>())).margin(1e-6));
   CHECK(pe32[0][4].item<double>() == Approx(std::cos(M_PI * x[0][1].item<double>())).margin(1e-6));
-  CHECK(pe32[0][8].item<double>() == Approx(std::sin(2 * M_PI * x[0][2].item<double>())).margin(1e-6));
+  CHECK(pe32[0][8].item<double>() ==
+        Approx(std::sin(2 * M_PI * x[0][2].item<double>())).margin(1e-6));
 }
 
-TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v", "[model][formulas]") {
+TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v",
+          "[model][formulas]") {
   torch::manual_seed(1);
   const int64_t nt = 40, n = 200, V = 3, C = 16;
-  TokenFrames frames{torch::randn({nt, 3}) * 0.3, torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
+  TokenFrames frames{torch::randn({nt, 3}) * 0.3,
+                     torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
   const auto tokens = torch::randn({V, nt, C});
   const auto xs = torch::randn({n, 3}) * 0.3;
   DPaRFConfig cfg;
@@ -70,7 +76,8 @@ TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v", 
   CHECK(max_abs(dparf.features(frames, tokens, xs), ref.at("h")) < 1e-4);
 }
 
-TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim=1)", "[model][formulas]") {
+TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim=1)",
+          "[model][formulas]") {
   torch::manual_seed(2);
   FDIConfig cfg;
   FDI fdi(cfg, 384);
@@ -79,8 +86,12 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   test::PythonReference py("formulas_fdi");
   py.add("s", s);
   py.add("a", a);
-  for (auto [name, layer] : {std::pair{"key0", fdi->key0}, {"value0", fdi->value0}, {"key1", fdi->key1},
-                             {"value1", fdi->value1}, {"fc_1", fdi->fc_1}, {"fc_2", fdi->fc_2}}) {
+  for (auto [name, layer] : {std::pair{"key0", fdi->key0},
+                             {"value0", fdi->value0},
+                             {"key1", fdi->key1},
+                             {"value1", fdi->value1},
+                             {"fc_1", fdi->fc_1},
+                             {"fc_2", fdi->fc_2}}) {
     py.add(std::string(name) + "_w", layer->weight);
     py.add(std::string(name) + "_b", layer->bias);
   }
@@ -93,7 +104,8 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   CHECK(max_abs(fdi->forward_folded(fdi->fold(), s, a), ref.at("e")) < 1e-4);
 }
 
-TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black background", "[render][formulas]") {
+TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black background",
+          "[render][formulas]") {
   torch::manual_seed(3);
   const int64_t R = 20, S = 16;
   auto raw = torch::randn({R, S, 4}) * 3;
@@ -126,7 +138,8 @@ TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black back
   CHECK(c.acc[2].item<double>() == 0);
 }
 
-TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvision's", "[model][formulas]") {
+TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvision's",
+          "[model][formulas]") {
   torch::manual_seed(4);
   EncoderConfig cfg;
   Encoder enc(cfg, true, 192);
@@ -145,10 +158,12 @@ TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvisi
   CHECK(max_abs(out.levels[2], ref.at("l2")) < 1e-4);
   const auto pixel = enc->pixel_features(out);
   CHECK(max_abs(pixel, ref.at("pixel")) < 1e-4);
-  CHECK(max_abs(torch::conv2d(pixel, enc->reduction_layer->weight, enc->reduction_layer->bias), ref.at("holder")) < 1e-4);
+  CHECK(max_abs(torch::conv2d(pixel, enc->reduction_layer->weight, enc->reduction_layer->bias),
+                ref.at("holder")) < 1e-4);
 }
 
-TEST_CASE("TransHE: ViT-Tiny blocks and positional encoding as timm computes them", "[model][formulas]") {
+TEST_CASE("TransHE: ViT-Tiny blocks and positional encoding as timm computes them",
+          "[model][formulas]") {
   torch::manual_seed(5);
   TransHEConfig cfg;
   cfg.depth = 2;
@@ -166,12 +181,15 @@ TEST_CASE("TransHE: ViT-Tiny blocks and positional encoding as timm computes the
   CHECK(max_abs(vit->forward(tokens, positions), ref.at("out")) < 1e-4);
 }
 
-TEST_CASE("token grouping: cluster means include invisible (zero) vertices by default", "[model][formulas]") {
+TEST_CASE("token grouping: cluster means include invisible (zero) vertices by default",
+          "[model][formulas]") {
   const auto values = torch::tensor({1.0f, 2.0f, 0.0f, 4.0f}).view({1, 4, 1});
   const auto labels = torch::tensor({0, 0, 1, 1}, torch::kLong);
   const auto vis = torch::tensor({true, true, false, true}).view({1, 4});
-  CHECK(torch::allclose(cluster_mean(values, labels, 3).flatten(), torch::tensor({1.5f, 2.0f, 0.0f})));
-  CHECK(torch::allclose(cluster_mean(values, labels, 3, vis).flatten(), torch::tensor({1.5f, 4.0f, 0.0f})));
+  CHECK(torch::allclose(cluster_mean(values, labels, 3).flatten(),
+                        torch::tensor({1.5f, 2.0f, 0.0f})));
+  CHECK(torch::allclose(cluster_mean(values, labels, 3, vis).flatten(),
+                        torch::tensor({1.5f, 4.0f, 0.0f})));
   // Token positions: ((p + 1.5) / 3 - 0.5) * 2 in float64, rounded once.
   const auto p = torch::tensor({0.3, -1.2, 0.7}, torch::kDouble).view({1, 3});
   const auto n = normalize_token_positions(p, 1.5, torch::zeros({1}));

@@ -4,11 +4,11 @@
 // from inside the recomputation. This walks the autograd graph of the per-point network, for
 // every form of every stage, and fails when it reaches per-frame work other than through a
 // visited tensor.
-#include <catch2/catch.hpp>
 #include <torch/csrc/autograd/function.h>
 #include <torch/csrc/autograd/functions/accumulate_grad.h>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <functional>
 #include <set>
 #include <string>
@@ -27,7 +27,8 @@ using Node = torch::autograd::Node;
 // The nodes of `output`'s graph created before `boundary` (per-frame work) that are reached
 // without passing through one of `stage` (the visited tensors' grad_fns). Parameters
 // (AccumulateGrad) are leaves and may be reached directly.
-std::vector<std::string> unvisited_frame_nodes(const torch::Tensor& output, const std::set<const Node*>& stage,
+std::vector<std::string> unvisited_frame_nodes(const torch::Tensor& output,
+                                               const std::set<const Node*>& stage,
                                                uint64_t boundary) {
   std::vector<std::string> found;
   std::set<const Node*> seen;
@@ -64,15 +65,21 @@ TEST_CASE("every per-frame tensor that the per-point network reads is visited, i
   const auto frame = test::synthetic_frame();
   const std::vector<Variant> variants{
       {"exact shortcuts (default)", [](ModelConfig&) {}},
-      {"reference, p_v materialised", [](ModelConfig& c) { c.exact_shortcuts = false, c.encoder.fast_sampling = false; }},
+      {"reference, p_v materialised",
+       [](ModelConfig& c) { c.exact_shortcuts = false, c.encoder.fast_sampling = false; }},
       {"reference, fast sampling", [](ModelConfig& c) { c.exact_shortcuts = false; }},
       {"w/o a", [](ModelConfig& c) { c.fdi.appearance = false; }},
       {"w/o h", [](ModelConfig& c) { c.fdi.human = false; }},
       {"w/o RGB", [](ModelConfig& c) { c.fdi.raw_rgb = false; }},
       {"w/o TransHE", [](ModelConfig& c) { c.transhe.enabled = false; }},
       {"absolute coordinates", [](ModelConfig& c) { c.dparf.coordinate = Coordinate::absolute; }},
-      {"no coordinates, reference", [](ModelConfig& c) { c.dparf.coordinate = Coordinate::none, c.exact_shortcuts = false; }},
-      {"SPC baseline", [](ModelConfig& c) { c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1, c.spc.channels = 8; }},
+      {"no coordinates, reference",
+       [](ModelConfig& c) { c.dparf.coordinate = Coordinate::none, c.exact_shortcuts = false; }},
+      {"SPC baseline",
+       [](ModelConfig& c) {
+         c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1,
+         c.spc.channels = 8;
+       }},
   };
   for (const auto& v : variants) {
     DYNAMIC_SECTION(v.name) {

@@ -1,7 +1,7 @@
 // The composed network: parameter counts, gradients, checkpointed chunks, BatchNorm modes.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <map>
 #include <set>
 
@@ -23,8 +23,9 @@ int64_t count_of(const std::vector<ParameterCount>& counts, const std::string& m
 }
 
 // One training-like step: stratified rendering of the target view's rays, MSE to a random image.
-torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& frame, int64_t rays_side,
-                          int samples, bool checkpoint, int64_t chunk = 4096, int64_t keep_graph_points = 0) {
+torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& frame,
+                          int64_t rays_side, int samples, bool checkpoint, int64_t chunk = 4096,
+                          int64_t keep_graph_points = 0) {
   RenderConfig rc;
   rc.samples = samples;
   rc.chunk_points = chunk;
@@ -40,7 +41,8 @@ torch::Tensor render_loss(TransHumanImpl& model, const test::SyntheticFrame& fra
 
 }  // namespace
 
-TEST_CASE("the default configuration has 6,922,244 active parameters (METHOD 3.4)", "[model][params]") {
+TEST_CASE("the default configuration has 6,922,244 active parameters (METHOD 3.4)",
+          "[model][params]") {
   TransHuman model(ModelConfig{});
   const auto counts = parameter_counts(*model);
   CHECK(count_of(counts, "encoder (ResNet-18 to layer2)") == 683072);
@@ -50,7 +52,8 @@ TEST_CASE("the default configuration has 6,922,244 active parameters (METHOD 3.4
   CHECK(count_of(counts, "total") == 6922244);
 }
 
-TEST_CASE("every parameter receives a finite gradient from one training step", "[model][gradients]") {
+TEST_CASE("every parameter receives a finite gradient from one training step",
+          "[model][gradients]") {
   const auto frame = test::synthetic_frame();
   torch::manual_seed(5);
   TransHuman model(test::tiny_model_config());
@@ -67,21 +70,26 @@ TEST_CASE("every parameter receives a finite gradient from one training step", "
   std::vector<std::string> missing, non_finite, zero;
   for (const auto& p : model->named_parameters()) {
     const auto& g = p.value().grad();
-    if (!g.defined()) missing.push_back(p.key());
-    else if (!torch::isfinite(g).all().item<bool>()) non_finite.push_back(p.key());
-    else if (g.abs().max().item<double>() == 0 && p.key() != "fdi.key0.bias") zero.push_back(p.key());
+    if (!g.defined())
+      missing.push_back(p.key());
+    else if (!torch::isfinite(g).all().item<bool>())
+      non_finite.push_back(p.key());
+    else if (g.abs().max().item<double>() == 0 && p.key() != "fdi.key0.bias")
+      zero.push_back(p.key());
   }
   std::string names;
   for (const auto& k : missing) names += "\n  no gradient: " + k;
   for (const auto& k : non_finite) names += "\n  non-finite gradient: " + k;
   for (const auto& k : zero) names += "\n  zero gradient: " + k;
-  INFO("missing: " << missing.size() << ", non-finite: " << non_finite.size() << ", zero: " << zero.size() << names);
+  INFO("missing: " << missing.size() << ", non-finite: " << non_finite.size()
+                   << ", zero: " << zero.size() << names);
   CHECK(missing.empty());
   CHECK(non_finite.empty());
   CHECK(zero.empty());
 }
 
-TEST_CASE("checkpointed chunks give the same loss and gradients as plain autograd", "[model][gradients]") {
+TEST_CASE("checkpointed chunks give the same loss and gradients as plain autograd",
+          "[model][gradients]") {
   const auto frame = test::synthetic_frame();
   torch::manual_seed(6);
   TransHuman model(test::tiny_model_config());
@@ -105,8 +113,10 @@ TEST_CASE("checkpointed chunks give the same loss and gradients as plain autogra
   }
 }
 
-TEST_CASE("train_recompute auto recomputes a field call above its threshold, with the same gradients bit for bit",
-          "[model][gradients][recompute]") {
+TEST_CASE(
+    "train_recompute auto recomputes a field call above its threshold, with the same gradients bit "
+    "for bit",
+    "[model][gradients][recompute]") {
   torch::set_num_threads(1);
   const auto frame = test::synthetic_frame();
   torch::manual_seed(6);
@@ -123,10 +133,12 @@ TEST_CASE("train_recompute auto recomputes a field call above its threshold, wit
   REQUIRE(rays * samples > kKeepGraphPoints);
   RenderConfig rc;
   auto grads = [&](const char* mode) {
-    rc.train_recompute = std::string(mode) == "never" ? Recompute::never
-                         : std::string(mode) == "always" ? Recompute::always : Recompute::automatic;
+    rc.train_recompute = std::string(mode) == "never"    ? Recompute::never
+                         : std::string(mode) == "always" ? Recompute::always
+                                                         : Recompute::automatic;
     model->zero_grad();
-    render_loss(*model, frame, side, samples, true, chunk, pipeline::keep_graph_points(rc)).backward();
+    render_loss(*model, frame, side, samples, true, chunk, pipeline::keep_graph_points(rc))
+        .backward();
     std::map<std::string, torch::Tensor> g;
     for (const auto& p : model->named_parameters()) g[p.key()] = p.value().grad().clone();
     return g;
@@ -145,7 +157,8 @@ TEST_CASE("train_recompute auto recomputes a field call above its threshold, wit
   }
 }
 
-TEST_CASE("gradients agree with finite differences on a tiny configuration (float64)", "[model][gradients]") {
+TEST_CASE("gradients agree with finite differences on a tiny configuration (float64)",
+          "[model][gradients]") {
   const auto frame = test::synthetic_frame(120, 10, 2, 16, 7);
   auto cfg = test::tiny_model_config(1);
   cfg.dparf.nk = 3;
@@ -198,7 +211,8 @@ TEST_CASE("gradients agree with finite differences on a tiny configuration (floa
   CHECK(nonzero > checked * 3 / 4);
 }
 
-TEST_CASE("BatchNorm uses the reference views' statistics at inference by default", "[model][encoder]") {
+TEST_CASE("BatchNorm uses the reference views' statistics at inference by default",
+          "[model][encoder]") {
   const auto frame = test::synthetic_frame();
   EncoderConfig batch_cfg, running_cfg;
   running_cfg.batchnorm = BatchNormStats::running;
@@ -215,19 +229,22 @@ TEST_CASE("BatchNorm uses the reference views' statistics at inference by defaul
   // Batch statistics: normalised output has ~zero mean per channel before the ReLU's effect;
   // compare with an explicit train-mode batch norm of the same input.
   const auto x = batch->model->conv1(images);
-  const auto expected = torch::relu(torch::batch_norm(x, batch->model->bn1->weight, batch->model->bn1->bias, {}, {}, true, 0.1, 1e-5, false));
+  const auto expected = torch::relu(torch::batch_norm(
+      x, batch->model->bn1->weight, batch->model->bn1->bias, {}, {}, true, 0.1, 1e-5, false));
   CHECK((l0_batch - expected).abs().max().item<double>() < 1e-5);
   CHECK(torch::equal(before, batch->model->bn1->running_mean));  // inference does not update them
   const auto l0_running = running->forward(images).levels[0];
-  const auto expected_running = torch::relu(torch::batch_norm(x, running->model->bn1->weight, running->model->bn1->bias,
-                                                              running->model->bn1->running_mean,
-                                                              running->model->bn1->running_var, false, 0.1, 1e-5, false));
+  const auto expected_running = torch::relu(torch::batch_norm(
+      x, running->model->bn1->weight, running->model->bn1->bias, running->model->bn1->running_mean,
+      running->model->bn1->running_var, false, 0.1, 1e-5, false));
   CHECK((l0_running - expected_running).abs().max().item<double>() < 1e-5);
   CHECK((l0_running - l0_batch).abs().max().item<double>() > 1e-3);
 }
 
-TEST_CASE("model.transhe.dim sets the width of the painted features, and the network builds and renders with it",
-          "[model][config]") {
+TEST_CASE(
+    "model.transhe.dim sets the width of the painted features, and the network builds and renders "
+    "with it",
+    "[model][config]") {
   const auto frame = test::synthetic_frame();
   auto cfg = test::tiny_model_config();
   cfg.transhe.dim = 96;

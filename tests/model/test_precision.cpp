@@ -1,8 +1,8 @@
 // Mixed precision: what the processor offers, how a setting resolves, and the products
 // themselves against a float64 reference.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -54,7 +54,8 @@ TEST_CASE("the bf16 instructions found by CPUID are the ones the kernel reports"
   CHECK(c.native() == (c.avx512_bf16 || c.amx_bf16));
 }
 
-TEST_CASE("precision auto takes bf16 exactly where the processor has native bf16 dot products", "[precision]") {
+TEST_CASE("precision auto takes bf16 exactly where the processor has native bf16 dot products",
+          "[precision]") {
   std::string why, warning;
   const auto p = resolve_products("auto", "auto", torch::kCPU, &why, &warning);
   const bool native = th::runtime::detect_cpu_bf16().native();
@@ -81,20 +82,26 @@ TEST_CASE("bad precision values are refused by name", "[precision]") {
         "precision 'fp16': expected fp32, bf16 or auto");
   CHECK(message([] { resolve_products("fp32", "mkl", torch::kCPU); }) ==
         "fp32_products 'mkl': expected auto, onednn or blas");
-  const auto m = message([] { th::config::load<th::Config>("configs/default.yaml", {"precision=half"}); });
+  const auto m =
+      message([] { th::config::load<th::Config>("configs/default.yaml", {"precision=half"}); });
   CHECK(m.find("'precision'") != std::string::npos);
   CHECK(m.find("half") != std::string::npos);
-  const auto n = message([] { th::config::load<th::Config>("configs/default.yaml", {"fp32_products=gpu"}); });
+  const auto n =
+      message([] { th::config::load<th::Config>("configs/default.yaml", {"fp32_products=gpu"}); });
   CHECK(n.find("'fp32_products'") != std::string::npos);
   CHECK(n.find("gpu") != std::string::npos);
 }
 
-TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradients included", "[precision]") {
+TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradients included",
+          "[precision]") {
   torch::manual_seed(0);
-  const auto x = torch::randn({1000, 3, 64}), w = torch::randn({96, 64}) * 0.1, b = torch::randn({96});
-  const auto ref = torch::nn::functional::linear(x.to(torch::kDouble), w.to(torch::kDouble), b.to(torch::kDouble));
-  std::vector<std::pair<const char*, Products>> paths{{"blas", resolve_products("fp32", "blas", torch::kCPU)},
-                                                     {"bf16", resolve_products("bf16", "auto", torch::kCPU)}};
+  const auto x = torch::randn({1000, 3, 64}), w = torch::randn({96, 64}) * 0.1,
+             b = torch::randn({96});
+  const auto ref = torch::nn::functional::linear(x.to(torch::kDouble), w.to(torch::kDouble),
+                                                 b.to(torch::kDouble));
+  std::vector<std::pair<const char*, Products>> paths{
+      {"blas", resolve_products("fp32", "blas", torch::kCPU)},
+      {"bf16", resolve_products("bf16", "auto", torch::kCPU)}};
   // Where oneDNN's product is wrong (Debian 13's LibTorch 2.6), it is refused, and auto takes BLAS.
   if (th::model::onednn_products_agree()) {
     paths.emplace_back("onednn", resolve_products("fp32", "onednn", torch::kCPU));
@@ -115,7 +122,8 @@ TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradi
     auto xd = x.to(torch::kDouble).requires_grad_(), wd = w.to(torch::kDouble).requires_grad_(),
          bd = b.to(torch::kDouble).requires_grad_();
     (torch::nn::functional::linear(xd, wd, bd) * g).sum().backward();
-    auto xf = x.clone().requires_grad_(), wf = w.clone().requires_grad_(), bf = b.clone().requires_grad_();
+    auto xf = x.clone().requires_grad_(), wf = w.clone().requires_grad_(),
+         bf = b.clone().requires_grad_();
     (Products::fp32(p.linear(xf, wf, bf)) * g.to(torch::kFloat)).sum().backward();
     REQUIRE(wf.grad().defined());
     CHECK(wf.grad().scalar_type() == torch::kFloat);
@@ -133,7 +141,8 @@ TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradi
   }
 }
 
-TEST_CASE("frame autocast runs bf16 convolutions only in its scope and restores the state", "[precision]") {
+TEST_CASE("frame autocast runs bf16 convolutions only in its scope and restores the state",
+          "[precision]") {
   auto conv = torch::nn::Conv2d(torch::nn::Conv2dOptions(3, 8, 3));
   const auto img = torch::rand({1, 3, 16, 16});
   REQUIRE(!th::compat::autocast_enabled(false));

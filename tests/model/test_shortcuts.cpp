@@ -1,8 +1,8 @@
 // The exact shortcuts of METHOD 9 against the direct computation they replace.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
 #include <array>
+#include <catch2/catch.hpp>
 
 #include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
@@ -42,10 +42,14 @@ void same_weights_for_inference(TransHuman& a, TransHuman& b) {
 
 }  // namespace
 
-TEST_CASE("composed sampling equals grid_sample of the bilinearly upsampled map", "[model][sampling]") {
+TEST_CASE("composed sampling equals grid_sample of the bilinearly upsampled map",
+          "[model][sampling]") {
   torch::manual_seed(1);
-  for (auto [h, w, H, W] : {std::array<int64_t, 4>{16, 16, 32, 32}, {8, 5, 31, 19}, {17, 9, 33, 17},
-                            {32, 32, 32, 32}, {1, 3, 7, 9}}) {
+  for (auto [h, w, H, W] : {std::array<int64_t, 4>{16, 16, 32, 32},
+                            {8, 5, 31, 19},
+                            {17, 9, 33, 17},
+                            {32, 32, 32, 32},
+                            {1, 3, 7, 9}}) {
     const int64_t V = 2, C = 5, n = 200;
     const auto map = torch::randn({V, C, h, w}, torch::kDouble);
     const auto up = F::interpolate(map, F::InterpolateFuncOptions()
@@ -77,14 +81,17 @@ TEST_CASE("weighted gather backward equals index_select autograd", "[model][samp
   Taps taps{torch::randint(0, 50, {30, 9}), torch::rand({30, 9}, torch::kDouble)};
   const auto g = torch::randn({30, 7}, torch::kDouble);
   const auto out = weighted_gather(table, taps);
-  const auto ref = (table.index_select(0, taps.index.flatten()).view({30, 9, 7}) * taps.weight.unsqueeze(-1)).sum(1);
+  const auto ref =
+      (table.index_select(0, taps.index.flatten()).view({30, 9, 7}) * taps.weight.unsqueeze(-1))
+          .sum(1);
   CHECK(max_abs(out, ref) < 1e-12);
   const auto g1 = torch::autograd::grad({out}, {table}, {g})[0];
   const auto g2 = torch::autograd::grad({ref}, {table}, {g})[0];
   CHECK(max_abs(g1, g2) < 1e-12);
 }
 
-TEST_CASE("pixel readouts equal the linear layer on the materialised pixel feature", "[model][sampling]") {
+TEST_CASE("pixel readouts equal the linear layer on the materialised pixel feature",
+          "[model][sampling]") {
   torch::manual_seed(3);
   for (bool raw_rgb : {true, false}) {
     EncoderConfig ec;
@@ -101,8 +108,10 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
     const auto readout = enc->make_readout(views, layer->weight, layer->bias);
     const auto flat = uv.reshape({-1, 2});
     const auto view = torch::arange(V).repeat({n});
-    const auto fast = readout.sample(views.geometry.stacked_level_taps(flat, view),
-                                     views.geometry.image_taps(flat, view)).view({n, V, -1});
+    const auto fast = readout
+                          .sample(views.geometry.stacked_level_taps(flat, view),
+                                  views.geometry.image_taps(flat, view))
+                          .view({n, V, -1});
     CHECK(max_abs(direct, fast) < 2e-5 * (1 + direct.abs().max().item<double>()));
     // p_v itself, and painting, without materialising the pixel feature.
     const auto p = enc->sample_pixel_features(views, views.geometry.stacked_level_taps(flat, view),
@@ -126,7 +135,9 @@ TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[m
       if (v == "wo_a") c.fdi.appearance = false;
       if (v == "wo_h") c.fdi.human = false;
       if (v == "wo_rgb") c.fdi.raw_rgb = false;
-      if (v == "spc") c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1, c.spc.channels = 8;
+      if (v == "spc")
+        c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1,
+        c.spc.channels = 8;
       torch::manual_seed(4);
       TransHuman fast(c);
       auto cd = c;
@@ -145,7 +156,8 @@ TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[m
   }
 }
 
-TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradients", "[model][shortcuts]") {
+TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradients",
+          "[model][shortcuts]") {
   torch::manual_seed(7);
   const int64_t n = 50, V = 3;
   auto q = torch::randn({n, V, 384}, torch::kDouble).requires_grad_(true);
@@ -167,9 +179,11 @@ TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradie
 TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][shortcuts]") {
   torch::manual_seed(8);
   const int64_t nt = 60, n = 500;
-  TokenFrames frames{torch::randn({nt, 3}) * 0.3, torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
+  TokenFrames frames{torch::randn({nt, 3}) * 0.3,
+                     torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
   const auto xs = torch::randn({n, 3}) * 0.4;
-  for (const Coordinate coordinate : {Coordinate::relative, Coordinate::absolute, Coordinate::none}) {
+  for (const Coordinate coordinate :
+       {Coordinate::relative, Coordinate::absolute, Coordinate::none}) {
     for (int nk : {1, 4, 7}) {
       DPaRFConfig cfg;
       cfg.coordinate = coordinate;
@@ -185,7 +199,8 @@ TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][sho
   }
 }
 
-TEST_CASE("readout windows sample a full-resolution map as grid_sample does", "[model][sampling][windows]") {
+TEST_CASE("readout windows sample a full-resolution map as grid_sample does",
+          "[model][sampling][windows]") {
   torch::manual_seed(11);
   const int64_t V = 3, C = 6, H = 23, W = 31, n = 400;
   const auto map = torch::randn({V, C, H, W}, torch::kDouble);
@@ -196,15 +211,19 @@ TEST_CASE("readout windows sample a full-resolution map as grid_sample does", "[
   int64_t offset = 0;
   for (int64_t v = 0; v < V; ++v) {
     const auto [x0, y0, w, h] = rects[v];
-    win.x0.push_back(x0), win.y0.push_back(y0), win.w.push_back(w), win.h.push_back(h), win.offset.push_back(offset);
+    win.x0.push_back(x0), win.y0.push_back(y0), win.w.push_back(w), win.h.push_back(h),
+        win.offset.push_back(offset);
     offset += w * h;
-    rows.push_back(map[v].slice(1, y0, y0 + h).slice(2, x0, x0 + w).permute({1, 2, 0}).reshape({-1, C}));
+    rows.push_back(
+        map[v].slice(1, y0, y0 + h).slice(2, x0, x0 + w).permute({1, 2, 0}).reshape({-1, C}));
   }
   const auto table = torch::cat(rows);
   REQUIRE(win.rows() == table.size(0));
   // The window pixels, in table order, are where the table's rows come from.
   const auto [px, pv] = win.pixels(torch::TensorOptions().dtype(torch::kDouble));
-  const auto at = map.permute({0, 2, 3, 1}).index({pv, px.select(1, 1).to(torch::kLong), px.select(1, 0).to(torch::kLong)});
+  const auto at =
+      map.permute({0, 2, 3, 1})
+          .index({pv, px.select(1, 1).to(torch::kLong), px.select(1, 0).to(torch::kLong)});
   CHECK(torch::equal(at, table));
 
   const auto uv = random_uv(n, V, W, H).to(torch::kDouble);
@@ -220,8 +239,8 @@ TEST_CASE("readout windows sample a full-resolution map as grid_sample does", "[
   auto expected = torch::zeros_like(inside);
   for (int64_t m = 0; m < flat.size(0); ++m) {
     const auto [x0, y0, w, h] = rects[view[m].item<int64_t>()];
-    expected[m] = ix0[m].item<double>() >= x0 && ix1[m].item<double>() < x0 + w && iy0[m].item<double>() >= y0 &&
-                  iy1[m].item<double>() < y0 + h;
+    expected[m] = ix0[m].item<double>() >= x0 && ix1[m].item<double>() < x0 + w &&
+                  iy0[m].item<double>() >= y0 && iy1[m].item<double>() < y0 + h;
   }
   CHECK(torch::equal(inside, expected));
   CHECK(inside.sum().item<int64_t>() > n / 2);
@@ -231,11 +250,13 @@ TEST_CASE("readout windows sample a full-resolution map as grid_sample does", "[
   CHECK(taps.weight.index({~inside}).abs().max().item<double>() == 0);
 }
 
-TEST_CASE("body windows contain the projection of every point within the culling distance", "[model][windows]") {
+TEST_CASE("body windows contain the projection of every point within the culling distance",
+          "[model][windows]") {
   const auto frame = test::synthetic_frame(300, 24, 3, 64);
   const auto& in = frame.inputs;
   FrameGeometry geo;
-  geo.K = in.K.to(torch::kFloat), geo.R = in.R.to(torch::kFloat), geo.T = in.T.to(torch::kFloat).reshape({-1, 3, 1});
+  geo.K = in.K.to(torch::kFloat), geo.R = in.R.to(torch::kFloat),
+  geo.T = in.T.to(torch::kFloat).reshape({-1, 3, 1});
   PixelGeometry g;
   g.views = 3, g.height = 64, g.width = 64;
   for (double r : {0.1, 0.02}) {
@@ -249,19 +270,24 @@ TEST_CASE("body windows contain the projection of every point within the culling
     const int64_t n = 20000;
     auto dir = torch::randn({n, 3});
     dir = dir / dir.norm(2, 1, true);
-    const auto radius = r * torch::where(torch::rand({n}) < 0.3, torch::ones({n}), torch::rand({n}).pow(1.0 / 3));
-    const auto pts = in.vertices.index_select(0, torch::randint(0, in.vertices.size(0), {n})) + dir * radius.unsqueeze(1);
-    const auto uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).reshape({-1, 2});
+    const auto radius =
+        r * torch::where(torch::rand({n}) < 0.3, torch::ones({n}), torch::rand({n}).pow(1.0 / 3));
+    const auto pts = in.vertices.index_select(0, torch::randint(0, in.vertices.size(0), {n})) +
+                     dir * radius.unsqueeze(1);
+    const auto uv =
+        geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).reshape({-1, 2});
     const auto view = torch::arange(3).repeat({n});
     CHECK(win.taps(uv, view, 64, 64).second.all().item<bool>());
     // The vertices themselves lie inside (left edges checked here).
     const auto vu = geometry::project_views(in.vertices, geo.K, geo.R, geo.T);
     for (int64_t v = 0; v < 3; ++v)
-      CHECK(win.x0[v] <= std::max<int64_t>(0, int64_t(std::floor(vu[v].select(1, 0).min().item<double>()))));
+      CHECK(win.x0[v] <=
+            std::max<int64_t>(0, int64_t(std::floor(vu[v].select(1, 0).min().item<double>()))));
   }
 }
 
-TEST_CASE("readout windows give the level tables' values, inside and outside the windows", "[model][windows]") {
+TEST_CASE("readout windows give the level tables' values, inside and outside the windows",
+          "[model][windows]") {
   const auto frame = test::synthetic_frame(300, 24, 3, 48);
   auto c = test::tiny_model_config();
   torch::manual_seed(13);
@@ -279,15 +305,20 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   torch::manual_seed(14);
   const int64_t n = 500;
   // Near the body (inside the windows) and far from it (read from the levels).
-  const auto near = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) + 0.05 * torch::rand({n, 3});
-  const auto far = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) + 0.6 * torch::randn({n, 3});
+  const auto near = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) +
+                    0.05 * torch::rand({n, 3});
+  const auto far = frame.inputs.vertices.index_select(0, torch::randint(0, 300, {n})) +
+                   0.6 * torch::randn({n, 3});
   const auto pts = torch::cat({near, far}), dirs = torch::randn({2 * n, 3});
   const auto& in = frame.inputs;
-  const auto uv = geometry::project_views(far, in.K.to(torch::kFloat), in.R.to(torch::kFloat), in.T.to(torch::kFloat).reshape({-1, 3, 1}))
+  const auto uv = geometry::project_views(far, in.K.to(torch::kFloat), in.R.to(torch::kFloat),
+                                          in.T.to(torch::kFloat).reshape({-1, 3, 1}))
                       .permute({1, 0, 2})
                       .reshape({-1, 2});
   const auto view = torch::arange(3).repeat({n});
-  CHECK((~std::get<WindowReadouts>(a.pixels).windows.taps(uv, view, 48, 48).second).sum().item<int64_t>() > 100);
+  CHECK((~std::get<WindowReadouts>(a.pixels).windows.taps(uv, view, 48, 48).second)
+            .sum()
+            .item<int64_t>() > 100);
   const auto ya = windows->forward(a, pts, dirs), yb = tables->forward(b, pts, dirs);
   INFO("max |raw| " << yb.abs().max().item<double>());
   CHECK(max_abs(ya, yb) < 1e-5 * (1 + yb.abs().max().item<double>()));

@@ -1,8 +1,8 @@
 // Checkpoints are read without trusting them: records, views, values, names, shapes
 // and the model settings they were trained with.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <cstring>
 #include <fstream>
 
@@ -10,12 +10,12 @@
 #include "core/error.hpp"
 #include "io/files.hpp"
 #include "io/zip.hpp"
-#include "pipeline/checked_load.hpp"
 #include "model/transhuman.hpp"
-#include "support/test_env.hpp"
-#include "support/tiny_config.hpp"
+#include "pipeline/checked_load.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/pipeline.hpp"
+#include "support/test_env.hpp"
+#include "support/tiny_config.hpp"
 #include "train/trainer.hpp"
 
 namespace fs = std::filesystem;
@@ -43,8 +43,9 @@ void save_model_only(th::model::TransHumanImpl& model, const fs::path& file, boo
 }
 
 // Rewrites the zip `file` with `edit` applied to its members (stored, as PyTorch writes).
-void rewrite_zip(const fs::path& file,
-                 const std::function<void(std::vector<std::pair<std::string, std::string>>&)>& edit) {
+void rewrite_zip(
+    const fs::path& file,
+    const std::function<void(std::vector<std::pair<std::string, std::string>>&)>& edit) {
   std::vector<std::pair<std::string, std::string>> members;
   for (auto& m : th::io::read_zip(th::io::read_file(file), file.string()))
     members.emplace_back(m.name, std::move(m.data));
@@ -63,7 +64,8 @@ std::string error_of(const std::function<void()>& fn) {
 
 }  // namespace
 
-TEST_CASE("a checkpoint's weights load back exactly through the checked reader", "[pipeline][checkpoint]") {
+TEST_CASE("a checkpoint's weights load back exactly through the checked reader",
+          "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto a = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_roundtrip");
@@ -75,7 +77,8 @@ TEST_CASE("a checkpoint's weights load back exactly through the checked reader",
   for (const auto& p : pa) CHECK(torch::equal(p.value(), pb[p.key()]));
 }
 
-TEST_CASE("a storage record truncated inside a valid zip is refused, naming the file", "[pipeline][checkpoint]") {
+TEST_CASE("a storage record truncated inside a valid zip is refused, naming the file",
+          "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_truncated"), file = dir / "cut.pt";
@@ -85,7 +88,8 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
   rewrite_zip(file, [&](auto& members) {
     size_t largest = 0, best = 0;
     for (size_t i = 0; i < members.size(); ++i)
-      if (members[i].first.find("/data/") != std::string::npos && members[i].second.size() > largest)
+      if (members[i].first.find("/data/") != std::string::npos &&
+          members[i].second.size() > largest)
         largest = members[best = i].second.size();
     REQUIRE(largest > 64);
     cut = members[best].first;
@@ -101,7 +105,8 @@ TEST_CASE("a storage record truncated inside a valid zip is refused, naming the 
                           Catch::Contains(" elements of 4 bytes are claimed"));
 }
 
-TEST_CASE("non-finite weights are refused naming the tensor and the index", "[pipeline][checkpoint]") {
+TEST_CASE("non-finite weights are refused naming the tensor and the index",
+          "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   {
@@ -123,8 +128,9 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
   // nothing is inflated or allocated.
   auto write = [&](const std::string& member, uint32_t claimed) {
     const std::string empty_dict_pickle("\x80\x02}q\x00.", 6);
-    std::string zip = th::io::write_zip(
-        {{"archive/version", "3\n"}, {"archive/data.pkl", empty_dict_pickle}, {member, std::string(100, 'x')}});
+    std::string zip = th::io::write_zip({{"archive/version", "3\n"},
+                                         {"archive/data.pkl", empty_dict_pickle},
+                                         {member, std::string(100, 'x')}});
     // The member's local header and central directory entry: method 8, `claimed` bytes.
     auto patch = [&](uint32_t signature, size_t method_at, size_t size_at, size_t name_at) {
       const std::string sig(reinterpret_cast<const char*>(&signature), 4);
@@ -139,17 +145,20 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
     th::io::write_file_atomic(file, zip);
   };
   write("archive/data/0", 100);
-  CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
-             Catch::Contains("packed.pt/archive/data/0") && Catch::Contains("compressed storage record"));
+  CHECK_THAT(
+      error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
+      Catch::Contains("packed.pt/archive/data/0") && Catch::Contains("compressed storage record"));
   auto model = make_model(tiny_config());
-  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*model, file); }), Catch::Contains("compressed storage record"));
+  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*model, file); }),
+             Catch::Contains("compressed storage record"));
   write("archive/data.pkl", 0x7fffffff);
   CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("archive/data.pkl") && Catch::Contains("claiming 2147483647 bytes"));
   write("archive/code/__torch__.py", 200);  // LibTorch's own small compressed code files pass
   CHECK_NOTHROW(th::pipeline::check_checkpoint_archive(file));
   // LibTorch's reader is not opened on a zip that is not a checkpoint.
-  th::io::write_file_atomic(file, th::io::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
+  th::io::write_file_atomic(
+      file, th::io::write_zip({{"archive/data.pkl", std::string("\x80\x02}q\x00.", 6)}}));
   CHECK_THAT(error_of([&] { th::pipeline::check_checkpoint_archive(file); }),
              Catch::Contains("not a PyTorch checkpoint (no <archive>/version record)"));
 }
@@ -157,24 +166,38 @@ TEST_CASE("compressed storage records and inflated claims are refused from the z
 TEST_CASE("tensor views are checked against their storage", "[pipeline][checkpoint]") {
   using th::pipeline::check_view;
   CHECK_NOTHROW(check_view({2, 3}, {3, 1}, 0, 6, "v"));
-  CHECK_NOTHROW(check_view({3, 2}, {1, 3}, 0, 6, "v"));  // transposed
+  CHECK_NOTHROW(check_view({3, 2}, {1, 3}, 0, 6, "v"));              // transposed
   CHECK_NOTHROW(check_view({0, 1000000}, {1000000, 1}, 0, 0, "v"));  // empty
-  CHECK_THAT(error_of([] { check_view({2, 3}, {3, 1}, 1, 6, "t.pt: a tensor"); }),
+  CHECK_THAT(error_of([] {
+               check_view({2, 3}, {3, 1}, 1, 6, "t.pt: a tensor");
+             }),
              Catch::Contains("t.pt: a tensor") && Catch::Contains("needs 7 elements"));
-  CHECK_THAT(error_of([] { check_view({4}, {-1}, 3, 6, "v"); }), Catch::Contains("has a negative size or stride"));
-  CHECK_THAT(error_of([] { check_view({-4}, {1}, 0, 6, "v"); }), Catch::Contains("has a negative size or stride"));
-  CHECK_THAT(error_of([] { check_view({2}, {1}, -1, 6, "v"); }), Catch::Contains("before its storage"));
+  CHECK_THAT(error_of([] { check_view({4}, {-1}, 3, 6, "v"); }),
+             Catch::Contains("has a negative size or stride"));
+  CHECK_THAT(error_of([] { check_view({-4}, {1}, 0, 6, "v"); }),
+             Catch::Contains("has a negative size or stride"));
+  CHECK_THAT(error_of([] { check_view({2}, {1}, -1, 6, "v"); }),
+             Catch::Contains("before its storage"));
   // A 500-byte file must not become gigabytes: a stride-0 expansion is refused.
-  CHECK_THAT(error_of([] { check_view({1000000000, 1000}, {0, 0}, 0, 6, "v"); }), Catch::Contains("views 1000000000000 elements of a storage of 6"));
-  CHECK_THAT(error_of([] { check_view({int64_t{1} << 40, int64_t{1} << 40}, {1, 1}, 0, 6, "v"); }),
+  CHECK_THAT(error_of([] {
+               check_view({1000000000, 1000}, {0, 0}, 0, 6, "v");
+             }),
+             Catch::Contains("views 1000000000000 elements of a storage of 6"));
+  CHECK_THAT(error_of([] {
+               check_view({int64_t{1} << 40, int64_t{1} << 40}, {1, 1}, 0, 6, "v");
+             }),
              Catch::Contains("has more elements than can be counted"));
   CHECK_THAT(error_of([] { check_view({3}, {int64_t{1} << 62}, 0, 6, "v"); }),
              Catch::Contains("reaches past any storage"));
-  CHECK_THAT(error_of([] { check_view({2, 3}, {3}, 0, 6, "v"); }), Catch::Contains("has 1 stride(s) for 2 size(s)"));
+  CHECK_THAT(error_of([] {
+               check_view({2, 3}, {3}, 0, 6, "v");
+             }),
+             Catch::Contains("has 1 stride(s) for 2 size(s)"));
 }
 
-TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_mismatch=warn goes on",
-          "[pipeline][checkpoint]") {
+TEST_CASE(
+    "a checkpoint of other model settings names the keys, and eval.model_mismatch=warn goes on",
+    "[pipeline][checkpoint]") {
   const auto c = tiny_config();
   auto model = make_model(c);
   const fs::path dir = th::test::scratch_dir("ckcheck_settings");
@@ -197,15 +220,18 @@ TEST_CASE("a checkpoint of other model settings names the keys, and eval.model_m
   // A checkpoint without a stored config: its run's config.yaml (two folders up) is compared.
   fs::create_directories(dir / "run" / "checkpoints");
   save_model_only(*model, dir / "run" / "checkpoints" / "old.pt", false);
-  th::config::write_yaml(dir / "run" / "config.yaml", th::config::to_tree(tiny_config({"model.dparf.nk=5"})));
-  CHECK_THAT(error_of([&] { th::pipeline::load_weights(*model, dir / "run" / "checkpoints" / "old.pt"); }),
-             Catch::Contains("model.dparf.nk: run config 5, config 3"));
+  th::config::write_yaml(dir / "run" / "config.yaml",
+                         th::config::to_tree(tiny_config({"model.dparf.nk=5"})));
+  CHECK_THAT(
+      error_of([&] { th::pipeline::load_weights(*model, dir / "run" / "checkpoints" / "old.pt"); }),
+      Catch::Contains("model.dparf.nk: run config 5, config 3"));
   // Without either, only shapes can be checked.
   save_model_only(*model, dir / "bare.pt", false);
   CHECK_NOTHROW(th::pipeline::load_weights(*b, dir / "bare.pt"));
 }
 
-TEST_CASE("missing, extra and reshaped parameters name the config key that decides them", "[pipeline][checkpoint]") {
+TEST_CASE("missing, extra and reshaped parameters name the config key that decides them",
+          "[pipeline][checkpoint]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_shapes");
   auto load_into = [&](const th::Config& saved, const th::Config& wanted) {
     auto a = make_model(saved);
@@ -221,8 +247,9 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
                                       Catch::Contains("model.transhe.depth"));
   CHECK_THAT(load_into(one, two), Catch::Contains("has no module 'human.ViT.blocks.1'") &&
                                       Catch::Contains("model.transhe.depth"));
-  CHECK_THAT(load_into(one, tiny_config({"model.fdi.raw_rgb=false"})),
-             Catch::Contains("encoder.reduction_layer.weight") && Catch::Contains("model.fdi.raw_rgb"));
+  CHECK_THAT(
+      load_into(one, tiny_config({"model.fdi.raw_rgb=false"})),
+      Catch::Contains("encoder.reduction_layer.weight") && Catch::Contains("model.fdi.raw_rgb"));
   CHECK_THAT(load_into(one, tiny_config({"model.fdi.appearance=false"})),
              Catch::Contains("fdi.alpha_res_0") && Catch::Contains("model.fdi.appearance"));
   // Nothing was half-copied: a failed load leaves the model as it was.
@@ -241,7 +268,8 @@ TEST_CASE("missing, extra and reshaped parameters name the config key that decid
 TEST_CASE("a resumed run's optimiser state must be finite too", "[pipeline][checkpoint]") {
   torch::set_num_threads(1);
   const auto c = tiny_config({"train.val_views=0"});
-  const fs::path run = th::test::scratch_dir("ckcheck_adam"), latest = run / "checkpoints" / "latest.pt";
+  const fs::path run = th::test::scratch_dir("ckcheck_adam"),
+                 latest = run / "checkpoints" / "latest.pt";
   th::train::train(c, torch::kCPU, {run, false, 1});
   // The same checkpoint with a NaN in Adam's first moment (trainer.cpp's layout).
   torch::serialize::InputArchive root, m, o;
@@ -270,8 +298,11 @@ TEST_CASE("a resumed run's optimiser state must be finite too", "[pipeline][chec
     out.write(key, t);
   }
   out.save_to(latest.string());
-  CHECK_THAT(error_of([&] { th::train::train(c, torch::kCPU, {run, true, 2}); }),
-             Catch::Contains("optimiser state exp_avg") && Catch::Contains("NaN") && Catch::Contains("latest.pt"));
+  CHECK_THAT(error_of([&] {
+               th::train::train(c, torch::kCPU, {run, true, 2});
+             }),
+             Catch::Contains("optimiser state exp_avg") && Catch::Contains("NaN") &&
+                 Catch::Contains("latest.pt"));
 }
 
 namespace {
@@ -290,13 +321,16 @@ void save_training_checkpoint(th::model::TransHumanImpl& model, const fs::path& 
 
 }  // namespace
 
-TEST_CASE("the token groups travel with every checkpoint and are used as stored", "[pipeline][checkpoint][tokens]") {
+TEST_CASE("the token groups travel with every checkpoint and are used as stored",
+          "[pipeline][checkpoint][tokens]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_tokens");
   auto c = tiny_config();
-  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  c.model.grouping.cache_dir =
+      (dir / "cache").string();  // (tiny_config sets the shared cache last)
   auto a = make_model(c);
   // A model without groups cannot be written: a run makes them first.
-  CHECK_THAT(error_of([&] { save_training_checkpoint(*a, dir / "none.pt"); }), Catch::Contains("no token groups"));
+  CHECK_THAT(error_of([&] { save_training_checkpoint(*a, dir / "none.pt"); }),
+             Catch::Contains("no token groups"));
   th::pipeline::Tokens made(*a, cloud());  // the run's start: k-means, stored in the model
   const auto labels = a->token_groups().labels;
   REQUIRE(labels.defined());
@@ -337,10 +371,12 @@ TEST_CASE("the token groups travel with every checkpoint and are used as stored"
              Catch::Contains("label 240 vertices; the body model (data.smpl_model) has 100"));
 }
 
-TEST_CASE("a checkpoint written before checkpoints stored their groups loads, computing them", "[pipeline][checkpoint][tokens]") {
+TEST_CASE("a checkpoint written before checkpoints stored their groups loads, computing them",
+          "[pipeline][checkpoint][tokens]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_tokens_old");
   auto c = tiny_config();
-  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  c.model.grouping.cache_dir =
+      (dir / "cache").string();  // (tiny_config sets the shared cache last)
   auto a = make_model(c);
   save_model_only(*a, dir / "old.pt", true);  // the layout before: no token_groups
   auto b = make_model(c);
@@ -351,12 +387,15 @@ TEST_CASE("a checkpoint written before checkpoints stored their groups loads, co
   CHECK(fs::exists(dir / "cache"));  // computed (and cached) as a run would
 }
 
-TEST_CASE("broken stored token groups are refused naming the file and the entry", "[pipeline][checkpoint][tokens]") {
+TEST_CASE("broken stored token groups are refused naming the file and the entry",
+          "[pipeline][checkpoint][tokens]") {
   const fs::path dir = th::test::scratch_dir("ckcheck_tokens_bad");
   auto c = tiny_config();
-  c.model.grouping.cache_dir = (dir / "cache").string();  // (tiny_config sets the shared cache last)
+  c.model.grouping.cache_dir =
+      (dir / "cache").string();  // (tiny_config sets the shared cache last)
   auto a = make_model(c);
-  auto write = [&](const std::string& name, const c10::IValue& origin, const torch::Tensor& labels) {
+  auto write = [&](const std::string& name, const c10::IValue& origin,
+                   const torch::Tensor& labels) {
     torch::serialize::OutputArchive root, m;
     a->save(m);
     root.write("model", m);
@@ -372,11 +411,14 @@ TEST_CASE("broken stored token groups are refused naming the file and the entry"
     return error_of([&] { th::pipeline::load_weights(*b, file); });
   };
   const auto range = write("range.pt", origin, torch::tensor({0, 1, 9}, torch::kInt64));
-  CHECK_THAT(load(range), Catch::Contains(range.string() + ": token_labels") && Catch::Contains("run from 0 to 9"));
+  CHECK_THAT(load(range), Catch::Contains(range.string() + ": token_labels") &&
+                              Catch::Contains("run from 0 to 9"));
   CHECK_THAT(load(write("hole.pt", origin, torch::tensor({0, 2, 2}, torch::kInt64))),
              Catch::Contains("1 of the 3 tokens hold no vertex"));
   CHECK_THAT(load(write("float.pt", origin, torch::rand({5}))), Catch::Contains("1-D int64"));
-  CHECK_THAT(load(write("nolabels.pt", origin, {})), Catch::Contains("without their labels 'token_labels'"));
+  CHECK_THAT(load(write("nolabels.pt", origin, {})),
+             Catch::Contains("without their labels 'token_labels'"));
   CHECK_THAT(load(write("perframe.pt", origin, torch::zeros({0}, torch::kInt64))),
-             Catch::Contains("grouped per frame") && Catch::Contains("model.grouping.kind is canonical_kmeans"));
+             Catch::Contains("grouped per frame") &&
+                 Catch::Contains("model.grouping.kind is canonical_kmeans"));
 }

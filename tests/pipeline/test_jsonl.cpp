@@ -1,10 +1,9 @@
 // metrics.jsonl and summary.json lines: JSON that nlohmann (and Python's json) reads back, in
 // the layout tools grep for.
 #include <catch2/catch.hpp>
-#include <nlohmann/json.hpp>
-
 #include <cmath>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "pipeline/jsonl.hpp"
@@ -47,9 +46,16 @@ TEST_CASE("strings needing escapes round-trip through nlohmann::json::parse", "[
 }
 
 TEST_CASE("a string that is not UTF-8 is written as U+FFFD, not refused", "[jsonl]") {
-  const std::string text = JsonLine().add("human", std::string("a\xff" "b")).str();
-  CHECK(text == "{\"human\": \"a\xef\xbf\xbd" "b\"}");
-  CHECK(nlohmann::json::parse(text)["human"] == "a\xef\xbf\xbd" "b");
+  const std::string text = JsonLine()
+                               .add("human", std::string("a\xff"
+                                                         "b"))
+                               .str();
+  CHECK(text ==
+        "{\"human\": \"a\xef\xbf\xbd"
+        "b\"}");
+  CHECK(nlohmann::json::parse(text)["human"] ==
+        "a\xef\xbf\xbd"
+        "b");
 }
 
 TEST_CASE("a JSON-lines file gets one parsable object per line, appended", "[jsonl]") {

@@ -1,19 +1,19 @@
 // Importing checkpoints of the reference implementation (METHOD 8) written by Debian's
 // python3-torch, pretrained encoder weights, and our own weights.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 
 #include "body/grouping.hpp"
 #include "core/error.hpp"
 #include "io/npy.hpp"
+#include "model/frame_fixture.hpp"
 #include "model/pretrained.hpp"
+#include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/pipeline.hpp"
 #include "pipeline/reference_import.hpp"
-#include "model/frame_fixture.hpp"
-#include "model/transhuman.hpp"
 
 using namespace th;
 using namespace th::model;
@@ -31,7 +31,8 @@ std::map<std::string, torch::Tensor> expected_tensors(const std::filesystem::pat
     in >> name >> dt;
     std::vector<int64_t> shape;
     for (int64_t s; in >> s;) shape.push_back(s);
-    out[name] = test::read_raw((dir / (name + ".bin")).string(), shape, dt == "f32" ? torch::kFloat : torch::kLong);
+    out[name] = test::read_raw((dir / (name + ".bin")).string(), shape,
+                               dt == "f32" ? torch::kFloat : torch::kLong);
   }
   return out;
 }
@@ -72,7 +73,8 @@ TEST_CASE("a reference .pth imports with equal tensors", "[pipeline][checkpoint]
     for (const auto& b : model->named_buffers()) {
       const auto ref = reference_name(b.key());
       INFO(b.key() << " <- " << ref);
-      CHECK(torch::equal(b.value(), expected.at(ref).reshape(b.value().sizes()).to(b.value().dtype())));
+      CHECK(torch::equal(b.value(),
+                         expected.at(ref).reshape(b.value().sizes()).to(b.value().dtype())));
     }
     CHECK(compared == static_cast<int>(model->named_parameters().size()));
   }
@@ -93,16 +95,20 @@ TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[pipeline][che
   CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "wrong_shape.pth"),
                     Catch::Contains("fc_3.weight") && Catch::Contains("[256, 255, 1]"));
   CHECK(torch::equal(before, model->heads->fc_3->weight));  // nothing copied
-  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "missing.pth"), Catch::Contains("alpha_fc.bias"));
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "missing.pth"),
+                    Catch::Contains("alpha_fc.bias"));
   // A key the reference network does not have, and integer or boolean values where weights go.
-  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "extra_key.pth"),
-                    Catch::Contains("extra_key.pth: key 'fc_5.weight' is not part of the TransHuman reference"));
-  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "int_tensor.pth"),
-                    Catch::Contains("key 'alpha_fc.bias' holds Long values, the model expects Float"));
+  CHECK_THROWS_WITH(
+      import_reference_checkpoint(*model, dir / "extra_key.pth"),
+      Catch::Contains("extra_key.pth: key 'fc_5.weight' is not part of the TransHuman reference"));
+  CHECK_THROWS_WITH(
+      import_reference_checkpoint(*model, dir / "int_tensor.pth"),
+      Catch::Contains("key 'alpha_fc.bias' holds Long values, the model expects Float"));
   CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "bool_tensor.pth"),
                     Catch::Contains("key 'rgb_fc.bias' holds Bool values"));
   CHECK(torch::equal(before, model->heads->fc_3->weight));
-  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "nonexistent.pth"), Catch::Contains("does not exist"));
+  CHECK_THROWS_WITH(import_reference_checkpoint(*model, dir / "nonexistent.pth"),
+                    Catch::Contains("does not exist"));
   const auto junk = dir / "junk.pth";
   std::ofstream(junk.string()) << "not a zip file";
   CHECK_THROWS_AS(import_reference_checkpoint(*model, junk), Error);
@@ -110,12 +116,13 @@ TEST_CASE("a mis-shaped or missing tensor fails naming the key", "[pipeline][che
   ModelConfig wo_rgb;
   wo_rgb.fdi.raw_rgb = false;
   TransHuman other(wo_rgb);
-  CHECK_THROWS_WITH(import_reference_checkpoint(*other, dir / "full.pth"), 
+  CHECK_THROWS_WITH(import_reference_checkpoint(*other, dir / "full.pth"),
                     Catch::Contains("full.pth: key '") && Catch::Contains("' has shape [") &&
                         Catch::Contains("], the model expects ["));
 }
 
-TEST_CASE("a reference .pth is loaded only with its token groups, or on an explicit 'compute'", "[pipeline][checkpoint][tokens]") {
+TEST_CASE("a reference .pth is loaded only with its token groups, or on an explicit 'compute'",
+          "[pipeline][checkpoint][tokens]") {
   const auto& dir = fixtures();
   const auto groups = test::scratch_dir("checkpoint_import_groups");
   REQUIRE(test::run_python("tests/python/kmeans_reference.py", groups.string() + " 690 300") == 0);
@@ -135,12 +142,15 @@ TEST_CASE("a reference .pth is loaded only with its token groups, or on an expli
     const std::string message = e.what();
     CHECK_THAT(message, Catch::Contains((dir / "full.pth").string()) &&
                             Catch::Contains("model.grouping.kmeans_file") &&
-                            Catch::Contains("kmeans_dict/kmeans_dict_300.npy") && Catch::Contains("'compute'"));
+                            Catch::Contains("kmeans_dict/kmeans_dict_300.npy") &&
+                            Catch::Contains("'compute'"));
   }
   // The reference's file: its labels, as the reference reads them.
   const auto with_file = load((groups / "kmeans_dict.npy").string());
-  CHECK(torch::equal(with_file->token_groups().labels, body::load_reference_kmeans(groups / "kmeans_dict.npy", 690)));
-  // The explicit opt-in: no groups yet, computed from model.grouping when a frame is first prepared.
+  CHECK(torch::equal(with_file->token_groups().labels,
+                     body::load_reference_kmeans(groups / "kmeans_dict.npy", 690)));
+  // The explicit opt-in: no groups yet, computed from model.grouping when a frame is first
+  // prepared.
   auto computed = load("compute");
   CHECK(computed->token_groups().empty());
   Tokens tokens(*computed, torch::rand({690, 3}, torch::kFloat64));
@@ -157,7 +167,8 @@ TEST_CASE("the full checkpoint's other entries are readable", "[pipeline][checkp
 TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[pipeline][checkpoint]") {
   const auto& dir = fixtures();
   REQUIRE(test::run_python("scripts/export_pretrained.py",
-                           "--weights " + (dir / "resnet18.pth").string() + " --out " + (dir / "resnet18.npz").string()) == 0);
+                           "--weights " + (dir / "resnet18.pth").string() + " --out " +
+                               (dir / "resnet18.npz").string()) == 0);
   auto cfg = test::tiny_model_config();
   cfg.encoder.pretrained = (dir / "resnet18.npz").string();
   TransHuman model(cfg);  // loads in the constructor
@@ -172,27 +183,32 @@ TEST_CASE("scripts/export_pretrained.py output loads into the encoder", "[pipeli
   }
 }
 
-TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip", "[pipeline][checkpoint]") {
+TEST_CASE("pretrained ResNet-18 weights load from an npz, own weights round-trip",
+          "[pipeline][checkpoint]") {
   const auto dir = test::scratch_dir("checkpoint_own");
   TransHuman a(test::tiny_model_config()), b(test::tiny_model_config());
   a->set_token_groups({torch::tensor({0, 1, 1, 0}), "test groups"});
   save_model_weights(*a, dir / "model.pt");
   load_model_weights(*b, dir / "model.pt");
   CHECK(torch::equal(b->token_groups().labels, a->token_groups().labels));
-  for (const auto& p : a->named_parameters()) CHECK(torch::equal(p.value(), b->named_parameters()[p.key()]));
+  for (const auto& p : a->named_parameters())
+    CHECK(torch::equal(p.value(), b->named_parameters()[p.key()]));
   // An npz with torchvision names (what scripts/export_pretrained.py writes).
   std::map<std::string, torch::Tensor> resnet;
-  for (const auto& p : a->encoder->model->named_parameters()) resnet[p.key()] = torch::randn_like(p.value());
+  for (const auto& p : a->encoder->model->named_parameters())
+    resnet[p.key()] = torch::randn_like(p.value());
   for (const auto& q : a->encoder->model->named_buffers()) resnet[q.key()] = q.value().clone();
   io::write_npz(dir / "resnet18.npz", resnet);
   load_pretrained_encoder(*b->encoder, dir / "resnet18.npz");
   CHECK(torch::equal(b->encoder->model->conv1->weight, resnet.at("conv1.weight")));
   resnet.erase("layer1.0.conv1.weight");
   io::write_npz(dir / "broken.npz", resnet);
-  CHECK_THROWS_WITH(load_pretrained_encoder(*b->encoder, dir / "broken.npz"), Catch::Contains("layer1.0.conv1.weight"));
+  CHECK_THROWS_WITH(load_pretrained_encoder(*b->encoder, dir / "broken.npz"),
+                    Catch::Contains("layer1.0.conv1.weight"));
 }
 
-TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", "[pipeline][checkpoint][parity]") {
+TEST_CASE("the default token PE is the reference's addcmul table, bit for bit",
+          "[pipeline][checkpoint][parity]") {
   // METHOD 3.2 [parity]: PyTorch's addcmul rounds x * f + phase once; at frequencies up to
   // 2^31 pi that decides the value. The table here is computed by the installed PyTorch.
   torch::manual_seed(2);
@@ -211,11 +227,12 @@ TEST_CASE("the default token PE is the reference's addcmul table, bit for bit", 
   CHECK((other != table).sum().item<int64_t>() > 100);
 }
 
-TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end", "[pipeline][checkpoint][parity]") {
-  // The Python side (tests/python/model_reference.py render, written from docs/METHOD.md in PyTorch)
-  // loads the .pth that torch.save wrote and renders the rays of a small frame; the C++ import of
-  // the same file, with the default configuration, must give the same density, colour, acc and
-  // depth per ray.
+TEST_CASE("a reference checkpoint renders the independent Python reference's rays end to end",
+          "[pipeline][checkpoint][parity]") {
+  // The Python side (tests/python/model_reference.py render, written from docs/METHOD.md in
+  // PyTorch) loads the .pth that torch.save wrote and renders the rays of a small frame; the C++
+  // import of the same file, with the default configuration, must give the same density, colour,
+  // acc and depth per ray.
   const auto& dir = fixtures();
   const auto f = test::synthetic_frame(300, 24, 3, 32, 4);
   auto rays = test::target_rays(f, 16);
@@ -234,30 +251,48 @@ TEST_CASE("a reference checkpoint renders the independent Python reference's ray
   const int64_t S = rc.samples;
   const auto t = torch::linspace(0, 1, S);
   const auto z = rays.near.unsqueeze(1) * (1 - t) + rays.far.unsqueeze(1) * t;
-  const auto pts = (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2)).reshape({-1, 3});
+  const auto pts =
+      (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2)).reshape({-1, 3});
   const auto dirs = rays.directions.unsqueeze(1).expand({-1, S, 3}).reshape({-1, 3});
   const auto sigma = model->forward(cache, pts, dirs).select(1, 3).view({-1, S});
 
   test::PythonReference py("render_end_to_end");
   const auto& in = f.inputs;
   for (const auto& [name, tensor] : std::vector<std::pair<std::string, torch::Tensor>>{
-           {"ref_images", in.ref_images}, {"K", in.K}, {"R", in.R}, {"T", in.T}, {"vertices", in.vertices},
-           {"Rh", in.Rh}, {"Th", in.Th}, {"A", in.A}, {"canonical", in.canonical},
-           {"visibility", in.visibility.to(torch::kLong)}, {"labels", in.labels}, {"origins", rays.origins},
-           {"directions", rays.directions}, {"near", rays.near}, {"far", rays.far},
-           {"samples", torch::tensor({S})}, {"cull", torch::tensor({rc.cull_distance}, torch::kDouble)}})
+           {"ref_images", in.ref_images},
+           {"K", in.K},
+           {"R", in.R},
+           {"T", in.T},
+           {"vertices", in.vertices},
+           {"Rh", in.Rh},
+           {"Th", in.Th},
+           {"A", in.A},
+           {"canonical", in.canonical},
+           {"visibility", in.visibility.to(torch::kLong)},
+           {"labels", in.labels},
+           {"origins", rays.origins},
+           {"directions", rays.directions},
+           {"near", rays.near},
+           {"far", rays.far},
+           {"samples", torch::tensor({S})},
+           {"cull", torch::tensor({rc.cull_distance}, torch::kDouble)}})
     py.add(name, tensor);
   std::ofstream((py.dir() / "checkpoint.txt").string()) << (dir / "full.pth").string();
   const auto ref = py.run("render");
 
   const auto kept = ref.at("kept").to(torch::kBool);
-  INFO(rays.size() << " rays, " << kept.sum().item<int64_t>() << " of " << kept.numel() << " samples near the body");
+  INFO(rays.size() << " rays, " << kept.sum().item<int64_t>() << " of " << kept.numel()
+                   << " samples near the body");
   REQUIRE(kept.any().item<bool>());
-  const auto sigma_diff = (torch::where(kept, sigma, torch::zeros_like(sigma)) - ref.at("sigma")).abs().max().item<double>();
+  const auto sigma_diff = (torch::where(kept, sigma, torch::zeros_like(sigma)) - ref.at("sigma"))
+                              .abs()
+                              .max()
+                              .item<double>();
   const auto rgb_diff = (ours.rgb - ref.at("rgb")).abs().max().item<double>();
   const auto acc_diff = (ours.acc - ref.at("acc")).abs().max().item<double>();
   const auto depth_diff = (ours.depth - ref.at("depth")).abs().max().item<double>();
-  INFO("max |diff|: sigma " << sigma_diff << ", rgb " << rgb_diff << ", acc " << acc_diff << ", depth " << depth_diff);
+  INFO("max |diff|: sigma " << sigma_diff << ", rgb " << rgb_diff << ", acc " << acc_diff
+                            << ", depth " << depth_diff);
   CHECK(sigma_diff <= 1e-5);
   CHECK(rgb_diff <= 1e-5);
   CHECK(acc_diff <= 1e-5);

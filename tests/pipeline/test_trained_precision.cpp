@@ -1,9 +1,9 @@
 // Mixed precision on the trained tiny network (CTest fixture `trained_tiny`): fp32 products
 // through oneDNN and bf16 products against today's fp32 products through BLAS, per ray, and a
 // bf16 training step's loss and gradients against fp32's.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <cmath>
 #include <iostream>
 
@@ -24,7 +24,8 @@ struct Difference {
 
 // Renders the first `views` test views with `a` and `b` products; the largest and mean per-ray
 // differences of rgb and acc.
-Difference render_difference(Frames& f, const Products& a, const Products& b, size_t views, int samples) {
+Difference render_difference(Frames& f, const Products& a, const Products& b, size_t views,
+                             int samples) {
   auto rc = f.config.render;
   rc.samples = samples;
   Difference d;
@@ -35,9 +36,13 @@ Difference render_difference(Frames& f, const Products& a, const Products& b, si
     const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
     torch::NoGradGuard no_grad;
     f.model->set_products(a);
-    const auto ra = th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc, th::pipeline::kInference);
+    const auto ra =
+        th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc,
+                             th::pipeline::kInference);
     f.model->set_products(b);
-    const auto rb = th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc, th::pipeline::kInference);
+    const auto rb =
+        th::pipeline::render(*f.model, th::pipeline::prepare_frame(*f.model, inputs, rc), rays, rc,
+                             th::pipeline::kInference);
     REQUIRE(ra.acc.max().item<double>() > 0.5);  // the trained body is visible
     REQUIRE(rb.rgb.scalar_type() == torch::kFloat);
     const auto drgb = (ra.rgb - rb.rgb).abs(), dacc = (ra.acc - rb.acc).abs();
@@ -49,26 +54,30 @@ Difference render_difference(Frames& f, const Products& a, const Products& b, si
   }
   d.rgb_mean = rgb_sum / double(d.rays);
   d.acc_mean = acc_sum / double(d.rays);
-  std::cout << "per-ray differences over " << d.rays << " rays: rgb max " << d.rgb_max << " mean " << d.rgb_mean
-            << ", acc max " << d.acc_max << " mean " << d.acc_mean << std::endl;
+  std::cout << "per-ray differences over " << d.rays << " rays: rgb max " << d.rgb_max << " mean "
+            << d.rgb_mean << ", acc max " << d.acc_max << " mean " << d.acc_mean << std::endl;
   return d;
 }
 
 }  // namespace
 
-TEST_CASE("on a trained network, fp32 products through oneDNN render every ray within 1e-5 of BLAS products",
-          "[precision][onednn]") {
+TEST_CASE(
+    "on a trained network, fp32 products through oneDNN render every ray within 1e-5 of BLAS "
+    "products",
+    "[precision][onednn]") {
   torch::set_num_threads(1);
   if (!th::model::onednn_products_agree()) {
     // This LibTorch's oneDNN product is wrong (the probe compares it with BLAS): it is refused.
     CHECK_THROWS_WITH(resolve_products("fp32", "onednn", torch::kCPU),
                       Catch::Contains("disagrees with BLAS on a probe product"));
     CHECK(!resolve_products("fp32", "auto", torch::kCPU).onednn);
-    WARN("oneDNN's fp32 product disagrees with BLAS in this LibTorch: only its refusal was checked");
+    WARN(
+        "oneDNN's fp32 product disagrees with BLAS in this LibTorch: only its refusal was checked");
     return;
   }
   Frames f(surface_config({"data.ratio=0.5"}));
-  const auto blas = resolve_products("fp32", "blas", torch::kCPU), onednn = resolve_products("fp32", "onednn", torch::kCPU);
+  const auto blas = resolve_products("fp32", "blas", torch::kCPU),
+             onednn = resolve_products("fp32", "onednn", torch::kCPU);
   REQUIRE(!blas.onednn);
   REQUIRE(onednn.onednn);
   for (int samples : {64, 16}) {
@@ -83,7 +92,8 @@ TEST_CASE("on a trained network, bf16 products render every ray within 2e-3 of f
           "[precision][bf16]") {
   torch::set_num_threads(1);
   Frames f(surface_config({"data.ratio=0.5"}));
-  const auto fp32 = resolve_products("fp32", "blas", torch::kCPU), bf16 = resolve_products("bf16", "auto", torch::kCPU);
+  const auto fp32 = resolve_products("fp32", "blas", torch::kCPU),
+             bf16 = resolve_products("bf16", "auto", torch::kCPU);
   REQUIRE(bf16.bf16());
   for (int samples : {64, 16}) {
     CAPTURE(samples);
@@ -96,8 +106,10 @@ TEST_CASE("on a trained network, bf16 products render every ray within 2e-3 of f
   }
 }
 
-TEST_CASE("a bf16 training step's loss and gradients stay within 1% and 2% of fp32's, and no gradient underflows",
-          "[precision][bf16][train]") {
+TEST_CASE(
+    "a bf16 training step's loss and gradients stay within 1% and 2% of fp32's, and no gradient "
+    "underflows",
+    "[precision][bf16][train]") {
   torch::set_num_threads(1);
   Frames f(surface_config({"data.ratio=0.5"}));
   f.model->train();
@@ -105,7 +117,8 @@ TEST_CASE("a bf16 training step's loss and gradients stay within 1% and 2% of fp
   const auto inputs = f.inputs(s);
   auto rays = th::pipeline::sample_rays(s, torch::kCPU);
   torch::manual_seed(3);
-  rays = rays.index(torch::randperm(rays.size()).narrow(0, 0, std::min<int64_t>(rays.size(), 1024)));
+  rays =
+      rays.index(torch::randperm(rays.size()).narrow(0, 0, std::min<int64_t>(rays.size(), 1024)));
   struct Step {
     double loss;
     std::vector<torch::Tensor> grads;
@@ -153,10 +166,12 @@ TEST_CASE("a bf16 training step's loss and gradients stay within 1% and 2% of fp
     worst = std::max(worst, rel);
   }
   const double overall = std::sqrt(diff2 / norm2);
-  std::cout << "bf16 step: loss " << b.loss << " (fp32 " << a.loss << "), relative gradient difference overall "
-            << overall << ", largest per tensor " << worst << "; gradients zero in bf16 but not in fp32: " << underflow
-            << " of " << nonzero << std::endl;
-  CHECK(overall <= 0.02);  // measured: 0.2% overall, 6.8% at worst per tensor (an encoder convolution)
+  std::cout << "bf16 step: loss " << b.loss << " (fp32 " << a.loss
+            << "), relative gradient difference overall " << overall << ", largest per tensor "
+            << worst << "; gradients zero in bf16 but not in fp32: " << underflow << " of "
+            << nonzero << std::endl;
+  CHECK(overall <=
+        0.02);  // measured: 0.2% overall, 6.8% at worst per tensor (an encoder convolution)
   CHECK(nonzero > 0);
   CHECK(underflow * 1000 <= nonzero);  // fewer than 0.1%: no loss scaling needed
 }

@@ -1,9 +1,9 @@
 // The rendering shortcuts against the exact render, on the tiny network trained
 // until it has surfaces (CTest fixture `trained_tiny`, tests/configs/tiny_surface.yaml): a random
 // field has no surface to stop at, so these checks need a trained one.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -49,8 +49,10 @@ class CountingField : public th::render::RadianceField {
 
 }  // namespace
 
-TEST_CASE("on a trained network, early ray termination stays within its bound of the exact render on every ray",
-          "[inference][termination]") {
+TEST_CASE(
+    "on a trained network, early ray termination stays within its bound of the exact render on "
+    "every ray",
+    "[inference][termination]") {
   torch::set_num_threads(1);
   Frames f(surface_config({"data.ratio=0.5"}));
   REQUIRE(f.config.render.termination_transmittance > 0);  // on by default
@@ -98,7 +100,8 @@ TEST_CASE("on a trained network, early ray termination stays within its bound of
 TEST_CASE("on a trained network, readout windows render every ray as the per-level tables do",
           "[inference][windows]") {
   torch::set_num_threads(1);
-  Frames windows(surface_config({"data.ratio=0.5"})), tables(surface_config({"data.ratio=0.5", "model.readout_windows=false"}));
+  Frames windows(surface_config({"data.ratio=0.5"})),
+      tables(surface_config({"data.ratio=0.5", "model.readout_windows=false"}));
   REQUIRE(windows.config.model.readout_windows);  // on by default
   for (int samples : {64, 16}) {
     auto rc = windows.config.render;
@@ -122,8 +125,9 @@ TEST_CASE("on a trained network, readout windows render every ray as the per-lev
   }
 }
 
-TEST_CASE("a frame prepared once renders each of its views as preparing it for each does, bit for bit",
-          "[inference][termination]") {
+TEST_CASE(
+    "a frame prepared once renders each of its views as preparing it for each does, bit for bit",
+    "[inference][termination]") {
   torch::set_num_threads(1);
   Frames f(surface_config());
   th::pipeline::FrameReuse reuse;
@@ -131,8 +135,10 @@ TEST_CASE("a frame prepared once renders each of its views as preparing it for e
   for (size_t i = 0; i < std::min<size_t>(f.dataset->size(), 3); ++i) {
     const auto s = f.dataset->load(i, 0);
     const auto inputs = f.inputs(s);
-    const auto alone = th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr, torch::kCPU);
-    const auto shared = th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr, torch::kCPU, &reuse);
+    const auto alone =
+        th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr, torch::kCPU);
+    const auto shared = th::pipeline::evaluate_view(*f.model, f.config.render, s, inputs, nullptr,
+                                                    torch::kCPU, &reuse);
     CAPTURE(s.human, s.frame, s.target_view);
     CHECK(torch::equal(alone.pred, shared.pred));
     CHECK(alone.psnr == shared.psnr);
@@ -149,8 +155,9 @@ TEST_CASE("a frame prepared once renders each of its views as preparing it for e
   CHECK(reuse.prepared() == 2);
 }
 
-TEST_CASE("evaluation with the default shortcuts scores every image as the exact settings do, to 0.01 dB",
-          "[inference][termination]") {
+TEST_CASE(
+    "evaluation with the default shortcuts scores every image as the exact settings do, to 0.01 dB",
+    "[inference][termination]") {
   auto read_rows = [](const fs::path& csv) {
     std::ifstream in(csv);
     std::string line;
@@ -171,10 +178,13 @@ TEST_CASE("evaluation with the default shortcuts scores every image as the exact
   const std::vector<std::string> limit{"eval.limit=6", "render.samples=64", "threads=1"};
   auto exact_overrides = limit;
   exact_overrides.insert(exact_overrides.end(),
-                         {"render.termination_transmittance=0", "eval.reuse_frames=false", "model.readout_windows=false"});
+                         {"render.termination_transmittance=0", "eval.reuse_frames=false",
+                          "model.readout_windows=false"});
   th::eval::evaluate(surface_config(limit), torch::kCPU, trained_checkpoint(), dir / "fast");
-  th::eval::evaluate(surface_config(exact_overrides), torch::kCPU, trained_checkpoint(), dir / "exact");
-  const auto fast = read_rows(dir / "fast" / "per_image.csv"), exact = read_rows(dir / "exact" / "per_image.csv");
+  th::eval::evaluate(surface_config(exact_overrides), torch::kCPU, trained_checkpoint(),
+                     dir / "exact");
+  const auto fast = read_rows(dir / "fast" / "per_image.csv"),
+             exact = read_rows(dir / "exact" / "per_image.csv");
   REQUIRE(fast.size() == 6);
   REQUIRE(exact.size() == 6);
   double fast_points = 0, exact_points = 0;

@@ -2,9 +2,9 @@
 // The tiny network trained until it has surfaces (CTest fixture `trained_tiny`,
 // tests/configs/tiny_surface.yaml) and the frames of its identity test set.
 
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -22,10 +22,11 @@ namespace th::test {
 
 inline Config surface_config(std::vector<std::string> overrides = {}) {
   const auto root = tiny_dataset();
-  overrides.insert(overrides.begin(),
-                   {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
-                    "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
-                    "eval.setting=identity", "eval.save_images=false"});
+  overrides.insert(
+      overrides.begin(),
+      {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
+       "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
+       "eval.setting=identity", "eval.save_images=false"});
   return config::load<Config>("tests/configs/tiny_surface.yaml", overrides);
 }
 
@@ -48,7 +49,8 @@ struct Frames {
     pipeline::load_weights(*model, trained_checkpoint());
     model->eval();
     const auto smpl = data::load_body_model(config.data);
-    dataset = std::make_shared<const data::Dataset>(config.data, "identity", data::Dataset::Mode::Test, smpl);
+    dataset = std::make_shared<const data::Dataset>(config.data, "identity",
+                                                    data::Dataset::Mode::Test, smpl);
     canonical = smpl->v_template;
     tokens = std::make_unique<pipeline::Tokens>(*model, smpl->v_template);
   }

@@ -1,6 +1,7 @@
 // Sampling along rays, the body-distance structure, progressive vs full rendering.
-#include <catch2/catch.hpp>
 #include <torch/torch.h>
+
+#include <catch2/catch.hpp>
 
 #include "model/frame_fixture.hpp"
 #include "model/transhuman.hpp"
@@ -17,7 +18,8 @@ namespace {
 // inside 0.08 m.
 class DistanceField : public render::RadianceField {
  public:
-  explicit DistanceField(torch::Tensor vertices, double scale = 200) : v_(std::move(vertices)), scale_(scale) {}
+  explicit DistanceField(torch::Tensor vertices, double scale = 200)
+      : v_(std::move(vertices)), scale_(scale) {}
   torch::Tensor raw(const torch::Tensor& pts, const torch::Tensor& dirs) override {
     evaluated += pts.size(0);
     const auto d = std::get<0>(torch::cdist(pts, v_).min(1));
@@ -34,13 +36,15 @@ class DistanceField : public render::RadianceField {
 
 }  // namespace
 
-TEST_CASE("sample depths: linspace at inference, one jittered sample per interval in training", "[render]") {
+TEST_CASE("sample depths: linspace at inference, one jittered sample per interval in training",
+          "[render]") {
   const auto near = torch::tensor({1.0f, 2.0f}), far = torch::tensor({3.0f, 2.5f});
   const auto z = render::sample_depths(near, far, 5, false);
   CHECK(torch::allclose(z[0], torch::tensor({1.0f, 1.5f, 2.0f, 2.5f, 3.0f})));
   const auto zs = render::sample_depths(near, far, 5, true);
   const auto mids = 0.5 * (z.narrow(1, 1, 4) + z.narrow(1, 0, 4));
-  const auto lower = torch::cat({z.narrow(1, 0, 1), mids}, 1), upper = torch::cat({mids, z.narrow(1, 4, 1)}, 1);
+  const auto lower = torch::cat({z.narrow(1, 0, 1), mids}, 1),
+             upper = torch::cat({mids, z.narrow(1, 4, 1)}, 1);
   CHECK(((zs >= lower) & (zs <= upper)).all().item<bool>());
 }
 
@@ -62,7 +66,8 @@ TEST_CASE("the body-distance grid answers like all pairwise distances", "[render
   }
 }
 
-TEST_CASE("progressive rendering equals full rendering and reports skipped points", "[render][progressive]") {
+TEST_CASE("progressive rendering equals full rendering and reports skipped points",
+          "[render][progressive]") {
   const auto frame = test::synthetic_frame();
   const auto rays = test::target_rays(frame, 24);
   REQUIRE(rays.size() > 100);
@@ -102,7 +107,8 @@ TEST_CASE("progressive rendering equals full rendering and reports skipped point
     // Reference: every point evaluated densely, raw zeroed where all vertices are >= 0.1 m away
     // (brute-force distances), then composited.
     const auto z = render::sample_depths(rays.near, rays.far, 64, false);
-    const auto pts = (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2)).reshape({-1, 3});
+    const auto pts = (rays.origins.unsqueeze(1) + rays.directions.unsqueeze(1) * z.unsqueeze(2))
+                         .reshape({-1, 3});
     const auto dirs = rays.directions.unsqueeze(1).expand({rays.size(), 64, 3}).reshape({-1, 3});
     auto raw = field.raw(pts, dirs);
     const auto keep = render::BodyDistance::near_brute_force(pts, frame.inputs.vertices, 0.1);
@@ -124,7 +130,8 @@ TEST_CASE("progressive rendering equals full rendering and reports skipped point
   }
 }
 
-TEST_CASE("early ray termination moves no ray by more than its transmittance bound", "[render][progressive]") {
+TEST_CASE("early ray termination moves no ray by more than its transmittance bound",
+          "[render][progressive]") {
   const auto frame = test::synthetic_frame();
   const auto rays = test::target_rays(frame, 24);
   RenderConfig rc;

@@ -1,9 +1,8 @@
 // The page writer without a browser: escaping, what index.html embeds, what the folder holds.
 #include <catch2/catch.hpp>
-#include <nlohmann/json.hpp>
-
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "core/error.hpp"
@@ -38,12 +37,14 @@ void write(const fs::path& p, const std::string& text) {
 
 // An evaluation folder as transhuman-eval leaves it, with two images and their panels.
 fs::path fake_eval(const fs::path& dir) {
-  write(dir / "summary.json",
-        "{\"setting\": \"identity\", \"images\": 2, \"psnr\": 21.5, \"ssim\": 0.7, \"lpips\": null, "
-        "\"lpips_available\": \"no\", \"seconds_per_image\": 0.5}\n");
+  write(
+      dir / "summary.json",
+      "{\"setting\": \"identity\", \"images\": 2, \"psnr\": 21.5, \"ssim\": 0.7, \"lpips\": null, "
+      "\"lpips_available\": \"no\", \"seconds_per_image\": 0.5}\n");
   write(dir / "per_image.csv",
         "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n"
-        "CoreView_s03,0,3,20.000000,0.600000,n/a,0.5,10,1\nCoreView_s03,2,5,23.000000,0.800000,n/a,0.5,10,1\n");
+        "CoreView_s03,0,3,20.000000,0.600000,n/a,0.5,10,1\nCoreView_s03,2,5,23.000000,0.800000,n/"
+        "a,0.5,10,1\n");
   write(dir / "config.yaml", "note: </script><b>\n");
   write(dir / "images" / "CoreView_s03_f0000_v03.png", "png");
   write(dir / "images" / "CoreView_s03_f0002_v05.png", "png");
@@ -58,14 +59,15 @@ TEST_CASE("script_json escapes quotes, newlines and anything that could close th
   CHECK(script_json("a\"b\\c\nd") == "\"a\\\"b\\\\c\\nd\"");
   CHECK(script_json("</script><!--") == "\"\\u003c/script\\u003e\\u003c!--\"");
   CHECK(script_json(std::string("\x01", 1)) == "\"\\u0001\"");
-  CHECK(script_json("λ") == "\"λ\"");  // UTF-8 passes through
+  CHECK(script_json("λ") == "\"λ\"");                                  // UTF-8 passes through
   CHECK(script_json(std::string("a\xff", 2)) == "\"a\xef\xbf\xbd\"");  // not UTF-8: U+FFFD
   // Still JSON, and the same value.
   const nlohmann::ordered_json value = {{"k&y", {"</script>", nullptr, 1.5, true}}};
   CHECK(nlohmann::ordered_json::parse(script_json(value)) == value);
 }
 
-TEST_CASE("an evaluation page embeds the outputs and refers to the panels where they lie", "[report]") {
+TEST_CASE("an evaluation page embeds the outputs and refers to the panels where they lie",
+          "[report]") {
   const fs::path eval = fake_eval(th::test::scratch_dir("report_eval") / "eval_identity");
   th::report::PageSources sources;
   sources.evals = {eval};
@@ -109,23 +111,27 @@ TEST_CASE("a demo page copies what it shows into its folder", "[report]") {
   CHECK(html.find(root.string()) == std::string::npos);  // nothing refers outside the folder
   // three.js comes with libjs-three, which scripts/install-deps.sh installs: its absence is a
   // broken set-up, not a case to skip.
-  INFO("three.js not found (TH_THREE_JS_DIR, /usr/share/javascript/three, /usr/share/nodejs/three)");
+  INFO(
+      "three.js not found (TH_THREE_JS_DIR, /usr/share/javascript/three, /usr/share/nodejs/three)");
   REQUIRE_FALSE(th::report::find_three_js().empty());
   CHECK(fs::exists(out / "three" / "three.min.js"));
   CHECK_THAT(html, Catch::Contains("<script src=\"three/PLYLoader.js\"></script>"));
 }
 
-TEST_CASE("folder names become safe relative links, and a link with a script scheme is refused", "[report]") {
+TEST_CASE("folder names become safe relative links, and a link with a script scheme is refused",
+          "[report]") {
   const fs::path root = th::test::scratch_dir("report_names");
   const fs::path eval = fake_eval(root / "javascript:alert(1);0");
   th::report::PageSources sources;
   sources.evals = {eval};
   sources.links = {{"home", "https://example.org/th"}, {"runs", "../runs/"}};
   const std::string html = read_all(th::report::write_page(sources, root / "page"));
-  CHECK_THAT(html, Catch::Contains("\"./javascript%3Aalert%281%29%3B0/images/CoreView_s03_f0000_v03.png\""));
+  CHECK_THAT(html, Catch::Contains(
+                       "\"./javascript%3Aalert%281%29%3B0/images/CoreView_s03_f0000_v03.png\""));
   // The name is shown as text; no link starts with it.
   CHECK(html.find("\"javascript:alert(1);0/") == std::string::npos);
-  for (const char* bad : {"javascript:alert(1)", "JavaScript:alert(1)", "data:text/html,<b>", "vbscript:x"}) {
+  for (const char* bad :
+       {"javascript:alert(1)", "JavaScript:alert(1)", "data:text/html,<b>", "vbscript:x"}) {
     CAPTURE(bad);
     sources.links = {{"x", bad}};
     CHECK_THROWS_WITH(th::report::write_page(sources, root / "page2"),
@@ -135,7 +141,8 @@ TEST_CASE("folder names become safe relative links, and a link with a script sch
   CHECK_FALSE(fs::exists(root / "page2"));  // refused before anything is written
 }
 
-TEST_CASE("a person's name with a comma and quotes survives per_image.csv (RFC 4180 quoting)", "[report]") {
+TEST_CASE("a person's name with a comma and quotes survives per_image.csv (RFC 4180 quoting)",
+          "[report]") {
   const fs::path eval = fake_eval(th::test::scratch_dir("report_csv") / "eval");
   write(eval / "per_image.csv",
         "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points\n"
@@ -151,7 +158,8 @@ TEST_CASE("a missing summary.json is an error naming the file", "[report]") {
   const fs::path dir = th::test::scratch_dir("report_missing");
   th::report::PageSources sources;
   sources.evals = {dir};
-  CHECK_THROWS_WITH(th::report::write_page(sources, dir), Catch::Contains((dir / "summary.json").string()));
+  CHECK_THROWS_WITH(th::report::write_page(sources, dir),
+                    Catch::Contains((dir / "summary.json").string()));
 }
 
 TEST_CASE("a summary.json that is not the evaluator's JSON is an error naming the file and key",
@@ -164,9 +172,11 @@ TEST_CASE("a summary.json that is not the evaluator's JSON is an error naming th
       {"{\"setting\": \"identity\", \"psnr\": 20.", file + " is not JSON ("},
       {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": NaN, \"ssim\": 0.5, \"lpips\": null}",
        file + ": 'psnr' = 'NaN' is not a finite number (or null)"},
-      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": 20, \"ssim\": -Infinity, \"lpips\": null}",
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": 20, \"ssim\": -Infinity, \"lpips\": "
+       "null}",
        file + ": 'ssim' = '-Infinity' is not a finite number (or null)"},
-      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": \"20\", \"ssim\": 0.5, \"lpips\": null}",
+      {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": \"20\", \"ssim\": 0.5, \"lpips\": "
+       "null}",
        file + ": 'psnr' = \"20\" is not a number"},
       {"{\"setting\": \"identity\", \"images\": 1, \"psnr\": 20, \"ssim\": 0.5}",
        file + " has no 'lpips'"},

@@ -30,7 +30,8 @@ inline std::string escaped(const std::string& s, size_t from, size_t count) {
 inline std::string byte_difference(const std::string& got, const std::string& want) {
   if (got == want) return "";
   const auto at = static_cast<size_t>(
-      std::mismatch(got.begin(), got.begin() + std::min(got.size(), want.size()), want.begin()).first -
+      std::mismatch(got.begin(), got.begin() + std::min(got.size(), want.size()), want.begin())
+          .first -
       got.begin());
   const size_t from = at >= 16 ? at - 16 : 0;
   return std::to_string(got.size()) + " bytes vs " + std::to_string(want.size()) +

@@ -31,7 +31,9 @@ inline std::string setting(const char* name, const char* compiled) {
 #define TH_TEST_PYTHON "/usr/bin/python3"
 #endif
 
-inline std::filesystem::path build_dir() { return detail::setting("TH_BUILD_DIR", TH_TEST_BUILD_DIR); }
+inline std::filesystem::path build_dir() {
+  return detail::setting("TH_BUILD_DIR", TH_TEST_BUILD_DIR);
+}
 inline std::filesystem::path test_tmp_root() {
   return detail::setting("TH_TEST_TMP", (build_dir() / "test_tmp").c_str());
 }
@@ -82,9 +84,7 @@ inline std::filesystem::path scratch_dir(const std::string& name) {
 }
 
 // Debian's python3 (with python3-numpy, -torch, -skimage): tests run reference scripts with it.
-inline std::string python() {
-  return detail::setting("TH_PYTHON", TH_TEST_PYTHON);
-}
+inline std::string python() { return detail::setting("TH_PYTHON", TH_TEST_PYTHON); }
 
 // Runs `python3 <script> <args>` from the repository root; returns the exit status.
 inline int run_python(const std::string& script, const std::string& args) {
@@ -99,6 +99,8 @@ inline std::filesystem::path tiny_dataset(bool exact = false) {
   return test_tmp_root() / (exact ? "synth_tiny_exact" : "synth_tiny");
 }
 // The tiny dataset's people in EasyMocap's layout (`synth_tiny_easymocap_dataset`).
-inline std::filesystem::path tiny_easymocap_dataset() { return test_tmp_root() / "synth_tiny_easymocap"; }
+inline std::filesystem::path tiny_easymocap_dataset() {
+  return test_tmp_root() / "synth_tiny_easymocap";
+}
 
 }  // namespace th::test

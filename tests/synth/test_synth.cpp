@@ -246,13 +246,15 @@ TEST_CASE("annots and params read back in C++ equal to numpy's reading", "[synth
     const auto ours = dir / "data" / human / "annots.npy";
     const auto numpy = dir / "numpy" / (std::string(human) + "_annots.npy");
     CHECK(th::io::read_npy_value(ours) == th::io::read_npy_value(numpy));
-    CHECK(th::test::byte_difference(read_all(ours), read_all(numpy)) == "");  // np.save of what numpy read
+    CHECK(th::test::byte_difference(read_all(ours), read_all(numpy)) ==
+          "");  // np.save of what numpy read
     const std::string params = std::string(human) == "CoreView_396"   ? "params/0.npy"
                                : std::string(human) == "CoreView_313" ? "new_params/1.npy"
                                                                       : "new_params/0.npy";
     const auto p_numpy = dir / "numpy" / (std::string(human) + "_params.npy");
     CHECK(th::io::read_npy_value(dir / "data" / human / params) == th::io::read_npy_value(p_numpy));
-    CHECK(th::test::byte_difference(read_all(dir / "data" / human / params), read_all(p_numpy)) == "");
+    CHECK(th::test::byte_difference(read_all(dir / "data" / human / params), read_all(p_numpy)) ==
+          "");
   }
   // The annots hold what METHOD 1.1 says: T in millimetres, K for the written size.
   const auto a = th::io::read_npy_value(dir / "data" / "CoreView_s03" / "annots.npy");

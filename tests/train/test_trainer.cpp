@@ -1,22 +1,21 @@
-#include <catch2/catch.hpp>
-
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <catch2/catch.hpp>
 #include <fstream>
 #include <sstream>
 
-#include "core/error.hpp"
-#include "train/schedule.hpp"
 #include "body/smpl.hpp"
+#include "core/error.hpp"
 #include "data/dataset.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
-#include "train/trainer.hpp"
-#include "train/validation.hpp"
 #include "support/test_env.hpp"
 #include "support/tiny_config.hpp"
+#include "train/schedule.hpp"
+#include "train/trainer.hpp"
+#include "train/validation.hpp"
 
 namespace fs = std::filesystem;
 
@@ -46,10 +45,12 @@ TEST_CASE("the schedule warms up linearly, then follows a cosine to min_lr", "[t
   CHECK(th::train::learning_rate(c, 3000) == Approx(1e-6));
 }
 
-TEST_CASE("a run stopped and resumed ends with the same weights as one that was not", "[train][resume]") {
+TEST_CASE("a run stopped and resumed ends with the same weights as one that was not",
+          "[train][resume]") {
   torch::set_num_threads(1);
   const auto c = tiny_config({"train.val_views=0"});
-  const fs::path a = th::test::scratch_dir("resume_straight"), b = th::test::scratch_dir("resume_split");
+  const fs::path a = th::test::scratch_dir("resume_straight"),
+                 b = th::test::scratch_dir("resume_split");
   const auto straight = th::train::train(c, torch::kCPU, {a, false, 4});
   CHECK(straight.steps == 4);
   const auto first = th::train::train(c, torch::kCPU, {b, false, 2});  // stops inside epoch 0
@@ -66,7 +67,8 @@ TEST_CASE("a run stopped and resumed ends with the same weights as one that was 
   torch::manual_seed(uint64_t(c.seed));
   th::model::TransHuman fresh(c.model);
   size_t changed = 0;
-  for (const auto& p : fresh->named_parameters()) changed += !torch::equal(p.value(), wa.at(p.key()));
+  for (const auto& p : fresh->named_parameters())
+    changed += !torch::equal(p.value(), wa.at(p.key()));
   CHECK(changed > 10);
 }
 
@@ -89,13 +91,15 @@ TEST_CASE("keeping the per-point graphs trains the same weights as recomputing t
       CAPTURE(mode);
       REQUIRE(weights[mode].size() == weights["always"].size());
       size_t differing = 0;
-      for (const auto& [name, t] : weights["always"]) differing += !torch::equal(t, weights[mode].at(name));
+      for (const auto& [name, t] : weights["always"])
+        differing += !torch::equal(t, weights[mode].at(name));
       CHECK(differing == 0);
     }
   }
 }
 
-TEST_CASE("the run directory holds metrics, checkpoints, validation images and the curve", "[train]") {
+TEST_CASE("the run directory holds metrics, checkpoints, validation images and the curve",
+          "[train]") {
   const auto c = tiny_config();
   const fs::path run = th::test::scratch_dir("train_outputs");
   const auto s = th::train::train(c, torch::kCPU, {run, false, -1});
@@ -155,8 +159,7 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
   const fs::path dir = th::test::scratch_dir("train_collapse");
   th::pipeline::JsonlWriter log(dir / "metrics.jsonl");
   spdlog::default_logger()->sinks().push_back(sink);
-  th::train::validate(*model, c, val, tokens, smpl->v_template, torch::kCPU,
-                      dir, 1, log, 0);
+  th::train::validate(*model, c, val, tokens, smpl->v_template, torch::kCPU, dir, 1, log, 0);
   spdlog::default_logger()->sinks().pop_back();
   CHECK_THAT(captured.str(), Catch::Contains("collapsed") && Catch::Contains("Try:"));
 }

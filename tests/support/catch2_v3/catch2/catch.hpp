@@ -3,7 +3,6 @@
 // on the include path only when CMake finds Catch2 3 (cmake/TransHuman.cmake, th_test).
 
 #include <catch2/catch_all.hpp>
-
 #include <string>
 
 using Catch::Approx;
