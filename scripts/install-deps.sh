@@ -8,6 +8,7 @@ packages=(
   libtorch-dev libopenblas0-pthread libopenblas-pthread-dev
   libopencv-dev libcli11-dev libspdlog-dev libfmt-dev catch2 libyaml-cpp-dev libgloo-dev
   libzstd-dev
+  clang-format-14  # the formatting check (scripts/check-format.sh)
   chromium libjs-three  # the HTML report: three.js for its 3D viewer, Chromium for its test
   libcpp-httplib-dev  # transhuman-view serves its page over HTTP
   nlohmann-json3-dev  # every JSON file and answer is read and written with nlohmann::json
