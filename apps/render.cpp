@@ -8,6 +8,8 @@
 #include "app/app.hpp"
 #include "app/ranks.hpp"
 #include "app/summary.hpp"
+#include "bake/bake.hpp"
+#include "core/error.hpp"
 #include "inference/free_view.hpp"
 
 int main(int argc, char** argv) {
@@ -42,6 +44,20 @@ int main(int argc, char** argv) {
     cli.add_option("--width", request.width, "output width (default: the view's at data.ratio)")
         ->check(th::app::at_least(1));
     cli.add_option("--height", request.height, "output height")->check(th::app::at_least(1));
+    bool baked = false;
+    th::bake::BakeOptions bake;
+    std::filesystem::path bake_in, bake_out;
+    cli.add_flag("--baked", baked,
+                 "render from the frame baked to a sparse grid (METHOD 7.1): a bake per body "
+                 "frame, then every view in milliseconds, a little less exact");
+    cli.add_option("--bake-voxel", bake.voxel, "bake: grid spacing in metres (default 0.02)")
+        ->check(CLI::Range(0.001, 0.2));
+    cli.add_option("--bake-in", bake_in,
+                   "bake: read this baked frame (written by --bake-out) instead of baking; "
+                   "implies --baked")
+        ->check(CLI::ExistingFile);
+    cli.add_option("--bake-out", bake_out,
+                   "bake: also write the (one) body frame's bake to this new file");
     th::app::add_force_option(
         cli, options,
         "replace what --out holds: frames of an earlier, different request, or another "
@@ -51,6 +67,11 @@ int main(int argc, char** argv) {
                            "cameras.yaml", "video.mp4", "contact_sheet.png"};
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
+    if (!bake_in.empty()) baked = true;
+    if (!bake_out.empty() && !baked) th::fail("--bake-out needs --baked");
+    if (!bake_out.empty() && std::filesystem::exists(bake_out))
+      th::fail("--bake-out '", bake_out.string(), "' exists: name a new file");
+    options.inputs.push_back({"the baked frame (--bake-in)", bake_in});
     request.force = options.force;
     options.inputs.push_back({"the camera path (--path)", request.path_file});
     if (!frames.empty()) request.frames = th::inference::parse_frame_range(frames);
@@ -72,6 +93,34 @@ int main(int argc, char** argv) {
                    plan.human_name, plan.frames.size(), plan.frames.size() > 1 ? "s" : "",
                    plan.width, plan.height);
       return 0;
+    }
+    std::unique_ptr<th::bake::BakedViews> views;
+    if (baked) {
+      views = std::make_unique<th::bake::BakedViews>(session, bake);
+      const auto plan = th::inference::plan_video(session, request);
+      if ((!bake_in.empty() || !bake_out.empty()) && plan.frames.size() != 1)
+        th::fail("--bake-in and --bake-out take one body frame; --frames names ",
+                 plan.frames.size());
+      if (!bake_in.empty()) views->use(th::bake::read_baked(bake_in));
+      const auto& b = views->bake(plan.prepared);
+      if (bake_in.empty()) {
+        const auto& r = views->last_report();
+        spdlog::info(
+            "bake: {} frame {} in {:.2f} s (coarse {:.2f}, fine {:.2f}, colour {:.2f}, "
+            "pack {:.2f}); points: {} coarse, {} fine, {} coloured; {} bricks, {:.1f} MiB",
+            b.human, b.frame, r.total_seconds(), r.seconds.at("coarse"), r.seconds.at("fine"),
+            r.seconds.at("colour"), r.seconds.at("pack"), r.coarse_points, r.fine_points,
+            r.color_points, b.stored_bricks(), b.bytes() / 1048576.0);
+      }
+      if (!bake_out.empty()) {
+        th::bake::write_baked(b, bake_out);
+        spdlog::info("bake: written to {}", bake_out.string());
+      }
+      request.renderer = [&views](const th::inference::PreparedFrame& frame,
+                                  const th::video::PathCamera& camera, int width, int height) {
+        return views->render(frame, camera, width, height);
+      };
+      request.renderer_id = views->id();
     }
     const auto comm = th::app::join_ranks(role, ctx);
     const auto s = th::inference::render_video(session, request, ctx.run_dir, comm.get());

@@ -127,6 +127,7 @@ std::string describe(const Session& session, const VideoRequest& r, const std::s
   y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value
     << height;
   y << YAML::Key << "video_frames" << YAML::Value << count;
+  if (r.renderer) y << YAML::Key << "renderer" << YAML::Value << r.renderer_id;
   y << YAML::Key << "settings" << YAML::Value << YAML::BeginMap;
   y << YAML::Key << "precision" << YAML::Value
     << model::resolve_products(c.precision, c.fp32_products, session.device()).describe();
@@ -338,7 +339,9 @@ VideoSummary render_video(const Session& session, const VideoRequest& request,
     const int frame = frames[size_t(k) % frames.size()];
     const auto t0 = std::chrono::steady_clock::now();
     if (prepared.frame != frame) prepared = session.prepare(h, frame, base_view);
-    const auto image = session.render(prepared, shots[size_t(k)], width, height);
+    const auto image = request.renderer
+                           ? request.renderer(prepared, shots[size_t(k)], width, height)
+                           : session.render(prepared, shots[size_t(k)], width, height);
     dist::Record rec;
     rec.put(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     rec.put(video::encode_png(video::to_bgr8(image), "video frame " + std::to_string(k)));

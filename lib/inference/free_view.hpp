@@ -9,6 +9,7 @@
 // request.yaml in the output folder says which).
 
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,11 @@ struct VideoRequest {
   int width = 0, height = 0;        // output size; 0: the view's image at data.ratio (K scaled)
   bool force = false;               // discard frames of an earlier, different request
   int contact_sheet_frames = 12;    // 0: no contact sheet
+  // Another renderer in place of Session::render (a baked one, METHOD 7.1): (H, W, 3) float32
+  // RGB in [0, 1]. `renderer_id` says what it is and how it is set up; request.yaml records it,
+  // so frames of one renderer are never resumed by another.
+  std::function<torch::Tensor(const PreparedFrame&, const video::PathCamera&, int, int)> renderer;
+  std::string renderer_id;
 };
 
 struct VideoSummary {

@@ -184,7 +184,9 @@ torch::Tensor Session::density(const PreparedFrame& frame, const torch::Tensor& 
   auto out = torch::zeros({pts.size(0)}, torch::kFloat32);
   render::for_each_chunk(pts.size(0), config_.render.chunk_points, [&](int64_t b, int64_t e) {
     const auto p = pts.slice(0, b, e).to(device_, torch::kFloat32);
-    const auto kept = frame.cache.geometry.body->near(p).nonzero().flatten();
+    const auto& body = frame.cache.geometry.body;  // null without a culling distance
+    const auto kept = body ? body->near(p).nonzero().flatten()
+                           : torch::arange(p.size(0), p.options().dtype(torch::kLong));
     if (kept.size(0) == 0) return;
     const auto sigma = model_->density(frame.cache, p.index_select(0, kept));
     out.slice(0, b, e).index_put_({kept.cpu()}, sigma.to(torch::kCPU, torch::kFloat32));
@@ -202,6 +204,29 @@ torch::Tensor Session::color(const PreparedFrame& frame, const torch::Tensor& pt
                                      dirs.slice(0, b, e).to(device_, torch::kFloat32));
     return torch::sigmoid(raw.slice(1, 0, 3)).to(torch::kCPU, torch::kFloat32);
   });
+}
+
+Session::DirectionalColors Session::colors_along(const PreparedFrame& frame,
+                                                 const torch::Tensor& pts,
+                                                 const torch::Tensor& directions) const {
+  TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "colors_along: pts must be (N, 3), got ",
+              pts.sizes());
+  torch::NoGradGuard no_grad;
+  const int64_t n = pts.size(0), k = directions.size(0);
+  DirectionalColors out{torch::zeros({n}, torch::kFloat32),
+                        torch::zeros({k, n, 3}, torch::kFloat32)};
+  const auto dirs = directions.to(device_, torch::kFloat32);
+  render::for_each_chunk(n, config_.render.chunk_points, [&](int64_t b, int64_t e) {
+    const auto raw = model_->forward_directions(
+        frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32), dirs);
+    auto sigma = raw.sigma;
+    if (const auto& body = frame.cache.geometry.body)  // culled as density() culls
+      sigma = torch::where(body->near(pts.slice(0, b, e).to(device_, torch::kFloat32)), sigma,
+                           torch::zeros_like(sigma));
+    out.sigma.slice(0, b, e).copy_(sigma.to(torch::kCPU, torch::kFloat32));
+    out.rgb.slice(1, b, e).copy_(torch::sigmoid(raw.rgb).to(torch::kCPU, torch::kFloat32));
+  });
+  return out;
 }
 
 }  // namespace th::inference

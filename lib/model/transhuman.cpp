@@ -139,6 +139,33 @@ torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tens
   return heads->density(t.e, products_);
 }
 
+TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& cache,
+                                                                  const torch::Tensor& pts,
+                                                                  const torch::Tensor& directions) {
+  TORCH_CHECK(directions.dim() == 2 && directions.size(1) == 3,
+              "forward_directions: directions must be (K, 3), got ", directions.sizes());
+  const auto t = trunk(cache, pts);
+  DirectionalRaw out;
+  torch::Tensor pix;
+  {
+    ScopedTimer timer(profile_, "heads");
+    out.sigma = heads->density(t.e, products_);
+  }
+  {
+    ScopedTimer timer(profile_, "sampling");
+    pix = pixels_->colour(cache.pixels, t.uv);
+  }
+  ScopedTimer timer(profile_, "heads");
+  std::vector<torch::Tensor> rgb;
+  const auto unit = directions.to(pts.options()) / directions.to(pts.options()).norm(2, 1, true);
+  for (int64_t k = 0; k < unit.size(0); ++k) {
+    const auto code = direction_encoding(unit[k].unsqueeze(0).expand({pts.size(0), 3}));
+    rgb.push_back(network_->colour(cache.network, t.e, pix, code, products_));
+  }
+  out.rgb = torch::stack(rgb);
+  return out;
+}
+
 torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache,
                                                     const torch::Tensor& pts,
                                                     const torch::Tensor& dirs) {

@@ -47,6 +47,16 @@ class TransHumanImpl : public torch::nn::Module {
   // extraction). One chunk, as forward.
   torch::Tensor density(const FrameCache& cache, const torch::Tensor& pts);
 
+  // Density and colour of points seen along K directions (baking, METHOD 7.1): the trunk and the
+  // pixel sampling run once, the colour head once per direction. pts: (N, 3) world, directions:
+  // (K, 3) any length -> sigma_raw (N) and rgb logits (K, N, 3); equal to forward() with each
+  // direction. One chunk, as forward.
+  struct DirectionalRaw {
+    torch::Tensor sigma, rgb;
+  };
+  DirectionalRaw forward_directions(const FrameCache& cache, const torch::Tensor& pts,
+                                    const torch::Tensor& directions);
+
   // Per-stage wall times are added to `profile` when set (benchmarks).
   void set_profile(render::Profile* profile) { profile_ = profile; }
   // The precision of the products (model/precision.hpp); fp32 through BLAS until set. The

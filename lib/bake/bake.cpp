@@ -1,0 +1,268 @@
+#include "bake/bake.hpp"
+
+#include <fmt/format.h>
+#include <torch/torch.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "core/error.hpp"
+
+namespace th::bake {
+namespace F = torch::nn::functional;
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double since(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// World positions of lattice points `index` (M, 3) int64 of spacing `step` from `origin`.
+torch::Tensor positions(const torch::Tensor& index, const std::array<double, 3>& origin,
+                        double step) {
+  return index.to(torch::kFloat64) * step +
+         torch::tensor({origin[0], origin[1], origin[2]}, torch::kFloat64);
+}
+
+// (X, Y, Z) -> (1, 1, X, Y, Z) float, and back.
+torch::Tensor volume(const torch::Tensor& t) {
+  return t.to(torch::kFloat32).unsqueeze(0).unsqueeze(0);
+}
+torch::Tensor unvolume(const torch::Tensor& t) { return t.squeeze(0).squeeze(0); }
+
+// Max over a (2r+1)^3 neighbourhood, same size.
+torch::Tensor dilate(const torch::Tensor& mask, int r) {
+  return unvolume(F::max_pool3d(volume(mask),
+                                F::MaxPool3dFuncOptions(2 * r + 1).stride(1).padding(r))) > 0;
+}
+
+}  // namespace
+
+double BakeReport::total_seconds() const {
+  double s = 0;
+  for (const auto& kv : seconds) s += kv.second;
+  return s;
+}
+
+void check_options(const BakeOptions& o) {
+  if (!(std::isfinite(o.voxel) && o.voxel >= 0.001 && o.voxel <= 0.2))
+    fail("bake voxel = ", o.voxel, " m: must be in [0.001, 0.2] metres");
+  if (o.coarse < 1 || o.coarse > 8) fail("bake coarse factor = ", o.coarse, ": must be in [1, 8]");
+  if (o.brick < 2 || o.brick > 32) fail("bake brick = ", o.brick, ": must be in [2, 32] cells");
+}
+
+BakedFrame bake_frame(const inference::Session& session, const inference::PreparedFrame& frame,
+                      const BakeOptions& options, BakeReport* report,
+                      const BakeProgress& progress) {
+  check_options(options);
+  torch::NoGradGuard no_grad;
+  BakeReport unused;
+  BakeReport& rep = report ? *report : unused;
+  const double h = options.voxel;
+  const int f = options.coarse;
+
+  BakedFrame out;
+  out.human = frame.sample.human;
+  out.frame = frame.sample.frame;
+  out.checkpoint = session.checkpoint_id();
+  out.reference_views = frame.sample.reference_views;
+  out.voxel = h;
+  out.brick = options.brick;
+  out.cull_distance = session.config().render.cull_distance;
+  const auto box = frame.sample.body.bounds.to(torch::kFloat64).contiguous();
+  for (int a = 0; a < 3; ++a) {
+    out.box[a] = box[0][a].item<double>();
+    out.box[3 + a] = box[1][a].item<double>();
+  }
+  // The lattice covers the box as the rays see it (padded by 0.01, data::near_far), in whole
+  // coarse cells.
+  std::array<int64_t, 3> coarse_cells{};
+  for (int a = 0; a < 3; ++a) {
+    out.origin[a] = out.box[a] - 0.01;
+    const double extent = out.box[3 + a] - out.box[a] + 0.02;
+    coarse_cells[a] = std::max<int64_t>(1, int64_t(std::ceil(extent / (h * f) - 1e-9)));
+    out.cells[a] = coarse_cells[a] * f;
+    if (out.cells[a] > 4096)
+      fail("bake voxel = ", h, " m: the frame's box needs ", out.cells[a],
+           " cells along an axis, more than 4096; choose a larger voxel");
+  }
+
+  // The network's work in chunks, with progress over the three stages' points.
+  const int64_t chunk = std::max<int64_t>(1024, session.config().render.chunk_points);
+  double done = 0, planned = 1;
+  auto tick = [&](int64_t n) {
+    done += double(n);
+    if (progress) progress(std::min(1.0, done / planned));
+  };
+  auto density = [&](const torch::Tensor& pts) {
+    auto sigma = torch::zeros({pts.size(0)}, torch::kFloat32);
+    for (int64_t b = 0; b < pts.size(0); b += chunk) {
+      const int64_t e = std::min(pts.size(0), b + chunk);
+      sigma.slice(0, b, e).copy_(session.density(frame, pts.slice(0, b, e)));
+      tick(e - b);
+    }
+    return sigma;
+  };
+
+  // 1. Coarse density.
+  auto start = Clock::now();
+  const auto grid_index = [](const std::array<int64_t, 3>& n) {
+    return torch::stack(torch::meshgrid({torch::arange(n[0] + 1), torch::arange(n[1] + 1),
+                                         torch::arange(n[2] + 1)},
+                                        "ij"),
+                        -1)
+        .reshape({-1, 3});
+  };
+  const auto coarse_index = grid_index(coarse_cells);
+  rep.coarse_points = coarse_index.size(0);
+  planned = double(rep.coarse_points) * 1.5;  // until the fine and colour work is known
+  const auto coarse = density(positions(coarse_index, out.origin, h * f))
+                          .view({coarse_cells[0] + 1, coarse_cells[1] + 1, coarse_cells[2] + 1});
+  rep.seconds["coarse"] = since(start);
+
+  // 2. Fine density where the surface passes.
+  start = Clock::now();
+  const auto positive = volume(coarse > 0);
+  const auto any = F::max_pool3d(positive, F::MaxPool3dFuncOptions(2).stride(1));
+  const auto all = -F::max_pool3d(-positive, F::MaxPool3dFuncOptions(2).stride(1));
+  auto refine = unvolume(any - all) > 0;  // coarse cells, (cx, cy, cz)
+  refine = dilate(refine, 1);
+  for (int a = 0; a < 3; ++a) refine = refine.repeat_interleave(f, a);  // fine cells
+  // A lattice point is refined when a cell it touches is.
+  const auto fine_mask =
+      unvolume(F::max_pool3d(volume(refine), F::MaxPool3dFuncOptions(2).stride(1).padding(1))) > 0;
+  auto fine = unvolume(F::interpolate(volume(coarse),
+                                      F::InterpolateFuncOptions()
+                                          .size(std::vector<int64_t>{
+                                              out.cells[0] + 1, out.cells[1] + 1, out.cells[2] + 1})
+                                          .mode(torch::kTrilinear)
+                                          .align_corners(true)))
+                  .contiguous();
+  const auto fine_index = fine_mask.nonzero();
+  rep.fine_points = fine_index.size(0);
+  planned = done + double(rep.fine_points) + 0.5 * double(rep.fine_points);
+  const auto flat = [&](const torch::Tensor& index) {
+    return (index.select(1, 0) * (out.cells[1] + 1) + index.select(1, 1)) * (out.cells[2] + 1) +
+           index.select(1, 2);
+  };
+  fine.view({-1}).index_put_({flat(fine_index)}, density(positions(fine_index, out.origin, h)));
+  rep.seconds["fine"] = since(start);
+
+  // 3. Colour along the six axis directions where a ray can see it.
+  start = Clock::now();
+  const auto pos = fine > 0;
+  const auto color_mask = dilate(pos, 1);
+  const auto color_index = color_mask.nonzero();
+  rep.color_points = color_index.size(0);
+  planned = done + 2.0 * double(rep.color_points);  // a colour point costs about two
+  const auto directions = torch::tensor({1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0,
+                                         0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0},
+                                        torch::kFloat32)
+                              .view({6, 3});
+  const auto color_pts = positions(color_index, out.origin, h);
+  auto colors = torch::zeros({rep.color_points, kColorDims}, torch::kFloat32);
+  const auto color_flat = flat(color_index);
+  for (int64_t b = 0; b < rep.color_points; b += chunk) {
+    const int64_t e = std::min(rep.color_points, b + chunk);
+    const auto seen = session.colors_along(frame, color_pts.slice(0, b, e), directions);
+    colors.slice(0, b, e).copy_(seen.rgb.mean(0));
+    // The density of these points, asked of the network with their colour: exact values where
+    // step 2 interpolated.
+    fine.view({-1}).index_put_({color_flat.slice(0, b, e)}, seen.sigma);
+    tick(2 * (e - b));
+  }
+  rep.seconds["colour"] = since(start);
+
+  // 4. The bricks with positive density, each with its (brick + 1)^3 lattice points.
+  start = Clock::now();
+  const int B = options.brick;
+  const auto nb = out.bricks();
+  const int64_t P = B + 1;
+  // Lattice padded with zeros to whole bricks.
+  auto padded = torch::zeros({nb[0] * B + 1, nb[1] * B + 1, nb[2] * B + 1}, torch::kFloat32);
+  padded.slice(0, 0, out.cells[0] + 1)
+      .slice(1, 0, out.cells[1] + 1)
+      .slice(2, 0, out.cells[2] + 1)
+      .copy_(fine);
+  auto color_dense = torch::full(fine.sizes(), -1, torch::kInt64);
+  color_dense.view({-1}).index_put_({color_flat}, torch::arange(rep.color_points));
+  auto color_row = torch::full(padded.sizes(), -1, torch::kInt64);
+  color_row.slice(0, 0, out.cells[0] + 1)
+      .slice(1, 0, out.cells[1] + 1)
+      .slice(2, 0, out.cells[2] + 1)
+      .copy_(color_dense);
+  const auto occupied =
+      unvolume(F::max_pool3d(volume(padded > 0), F::MaxPool3dFuncOptions(P).stride(B))) > 0;
+  const auto stored = occupied.flatten().nonzero().flatten();
+  const int64_t slots = stored.size(0);
+  out.slot.assign(size_t(nb[0] * nb[1] * nb[2]), -1);
+  const auto stored_acc = stored.accessor<int64_t, 1>();
+  for (int64_t s = 0; s < slots; ++s) out.slot[size_t(stored_acc[s])] = int32_t(s);
+  // Lattice indices of every stored brick's points: brick origin + local offset.
+  const auto brick_origin =
+      torch::stack({torch::div(stored, nb[1] * nb[2], "floor"),
+                    torch::div(stored, nb[2], "floor").remainder(nb[1]), stored.remainder(nb[2])},
+                   1) *
+      B;
+  const auto offsets = grid_index({B, B, B});  // (P^3, 3), x slowest
+  const auto index = (brick_origin.unsqueeze(1) + offsets.unsqueeze(0)).reshape({-1, 3});
+  const auto padded_flat =
+      (index.select(1, 0) * padded.size(1) + index.select(1, 1)) * padded.size(2) +
+      index.select(1, 2);
+  const auto density_values = padded.view({-1}).index_select(0, padded_flat).contiguous();
+  const auto rows = color_row.view({-1}).index_select(0, padded_flat);
+  const auto color_values =
+      torch::where(rows.ge(0).unsqueeze(1), colors.index_select(0, rows.clamp_min(0)),
+                   torch::zeros({1, kColorDims}, torch::kFloat32))
+          .contiguous();
+  out.density.assign(density_values.template data_ptr<float>(),
+                     density_values.template data_ptr<float>() + density_values.numel());
+  out.color.assign(color_values.template data_ptr<float>(),
+                   color_values.template data_ptr<float>() + color_values.numel());
+  TORCH_CHECK(int64_t(out.density.size()) == slots * P * P * P, "bake: brick packing");
+  rep.seconds["pack"] = since(start);
+  if (progress) progress(1.0);
+  return out;
+}
+
+BakedViews::BakedViews(const inference::Session& session, const BakeOptions& options)
+    : session_(session), options_(options) {
+  check_options(options);
+  march_.samples = session.config().render.samples;
+  march_.termination = session.config().render.termination_transmittance;
+}
+
+void BakedViews::use(BakedFrame baked) {
+  if (baked.checkpoint != session_.checkpoint_id())
+    fail("the baked frame of ", baked.human, " frame ", baked.frame, " was made by checkpoint ",
+         baked.checkpoint, ", not by ", session_.checkpoint_id(), ": bake it again");
+  if (baked.cull_distance != session_.config().render.cull_distance)
+    fail("the baked frame of ", baked.human, " frame ", baked.frame,
+         " was made with render.cull_distance ", baked.cull_distance, ", not ",
+         session_.config().render.cull_distance);
+  baked_ = std::move(baked);
+  kept_ = true;
+}
+
+const BakedFrame& BakedViews::bake(const inference::PreparedFrame& frame) {
+  if (kept_ && baked_.human == frame.sample.human && baked_.frame == frame.sample.frame &&
+      baked_.reference_views == frame.sample.reference_views)
+    return baked_;
+  report_ = {};
+  baked_ = bake_frame(session_, frame, options_, &report_);
+  kept_ = true;
+  return baked_;
+}
+
+torch::Tensor BakedViews::render(const inference::PreparedFrame& frame,
+                                 const video::PathCamera& camera, int width, int height) {
+  return render_baked(bake(frame), camera.K, camera.R, camera.T, width, height, march_).rgb;
+}
+
+std::string BakedViews::id() const {
+  return fmt::format("baked (voxel {} m, coarse x{}, brick {})", options_.voxel, options_.coarse,
+                     options_.brick);
+}
+
+}  // namespace th::bake

@@ -1,0 +1,81 @@
+#pragma once
+// Baking a prepared frame (METHOD 7.1): the network's density on a lattice near the body, coarse
+// to fine, and its colour along six directions where a ray can see it.
+//   1. Density on the coarse lattice (spacing voxel x coarse) over the frame's box; points
+//      farther than render.cull_distance from the body are 0, as the exact renderer culls them.
+//   2. Coarse cells whose corners are not all of one sign (the surface passes through them),
+//      and their neighbours, get the density on the fine lattice (spacing voxel); elsewhere the
+//      fine values are the coarse ones, interpolated.
+//   3. Colour on the fine points with positive density or next to it (the inside of the body
+//      included: with few samples per ray, a ray's first sample with density can lie deep
+//      inside): the mean of the network's colours along the six axis directions, its trunk
+//      shared by the six (model::TransHumanImpl::forward_directions).
+//   4. The bricks holding positive density are stored.
+
+#include <functional>
+#include <map>
+#include <string>
+
+#include "bake/baked_frame.hpp"
+#include "bake/march.hpp"
+#include "inference/session.hpp"
+#include "video/camera_path.hpp"
+
+namespace th::bake {
+
+struct BakeOptions {
+  double voxel = 0.02;  // fine lattice spacing, metres (the accuracy per spacing: METHOD 7.1)
+  int coarse = 2;       // coarse spacing in fine voxels
+  int brick = 8;        // cells per brick side
+};
+
+struct BakeReport {
+  std::map<std::string, double> seconds;  // per stage: coarse, fine, colour, pack
+  int64_t coarse_points = 0;              // lattice points asked of the network, per stage
+  int64_t fine_points = 0;
+  int64_t color_points = 0;  // points whose colour was asked (six directions each)
+  double total_seconds() const;
+};
+
+// Progress in [0, 1], called between chunks of network work.
+using BakeProgress = std::function<void(double)>;
+
+// Bakes `frame` of `session` (the session's device and precision). Throws th::Error for options
+// out of range (naming the option).
+BakedFrame bake_frame(const inference::Session& session, const inference::PreparedFrame& frame,
+                      const BakeOptions& options, BakeReport* report = nullptr,
+                      const BakeProgress& progress = {});
+
+// Checks options (th::Error naming the one out of range).
+void check_options(const BakeOptions& options);
+
+// Views of a session's prepared frames rendered from their bakes: a frame is baked when first
+// asked for (the last one is kept), or taken from a file given with use().
+class BakedViews {
+ public:
+  // The march takes the session's render.samples and render.termination_transmittance.
+  BakedViews(const inference::Session& session, const BakeOptions& options);
+
+  // `baked` serves as the bake of its person and frame (a file read with read_baked): th::Error
+  // when it was made by another checkpoint or another culling distance.
+  void use(BakedFrame baked);
+  // The bake of `frame`, made now unless kept.
+  const BakedFrame& bake(const inference::PreparedFrame& frame);
+  // (H, W, 3) float32 RGB in [0, 1], as Session::render.
+  torch::Tensor render(const inference::PreparedFrame& frame, const video::PathCamera& camera,
+                       int width, int height);
+  // What a video made with it records as its renderer: voxel, coarse factor, brick.
+  std::string id() const;
+  const BakeReport& last_report() const { return report_; }
+  const MarchOptions& march() const { return march_; }
+
+ private:
+  const inference::Session& session_;
+  BakeOptions options_;
+  MarchOptions march_;
+  bool kept_ = false;
+  BakedFrame baked_;
+  BakeReport report_;
+};
+
+}  // namespace th::bake

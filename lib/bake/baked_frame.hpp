@@ -1,0 +1,64 @@
+#pragma once
+// A frame baked to a sparse grid (METHOD 7.1): for one person, one frame and its reference views,
+// the network's raw density and its colour on the points of a regular lattice near the body, so
+// that any later view of the frame is a ray march through the grid, without the network.
+//
+// The lattice has spacing `voxel` from `origin` and `cells` cells per axis. It is stored in
+// bricks of `brick` cells per side; a brick holds its (brick + 1)^3 lattice points (its faces
+// duplicated with its neighbours, so a trilinear lookup never leaves its brick). Only bricks
+// where the density is positive somewhere are stored; elsewhere the density is 0, as the exact
+// renderer's culled samples.
+//
+// Colour per lattice point: the mean of the network's colours along the six axis directions.
+// The direction is not kept: on the demo checkpoint, degree-1 spherical harmonics fitted to the
+// six colours scored no better against the ground truth than their mean (bench/results/bake.md).
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace th::bake {
+
+// Floats of colour per lattice point: r, g, b in [0, 1].
+constexpr int kColorDims = 3;
+
+struct BakedFrame {
+  // What was baked: the person's folder name, the frame (annots index), the checkpoint's
+  // identity (Session::checkpoint_id) and the reference cameras.
+  std::string human;
+  int frame = 0;
+  std::string checkpoint;
+  std::vector<int> reference_views;
+
+  double voxel = 0;                // lattice spacing, metres
+  std::array<double, 3> origin{};  // world position of lattice point (0, 0, 0)
+  std::array<int64_t, 3> cells{};  // cells per axis (cells + 1 lattice points)
+  int brick = 8;                   // cells per brick side
+  std::array<double, 6> box{};     // the frame's box (min x, y, z, max x, y, z): rays' near/far
+  double cull_distance = 0;        // the renderer's culling distance when baked (render key)
+
+  // Per brick of the brick grid (x slowest, z fastest): its slot, or -1 where nothing is stored.
+  std::vector<int32_t> slot;
+  // Per slot: density (brick + 1)^3 and colour (brick + 1)^3 x kColorDims, lattice points x
+  // slowest, z fastest.
+  std::vector<float> density;
+  std::vector<float> color;
+
+  std::array<int64_t, 3> bricks() const;  // bricks per axis: ceil(cells / brick)
+  int64_t points_per_brick() const { return int64_t(brick + 1) * (brick + 1) * (brick + 1); }
+  int64_t stored_bricks() const;
+  int64_t bytes() const;  // of the grid in memory (what a file holds, header aside)
+};
+
+// Writes `frame` to `path` (binary: a versioned header, then the arrays; atomically: a partial
+// file never replaces a complete one). Throws th::Error naming the file when it cannot.
+void write_baked(const BakedFrame& frame, const std::filesystem::path& path);
+
+// Reads and checks a file written by write_baked: its format and version, every size against
+// the file's length, slots in range and unique, finite values. Throws th::Error naming the file
+// and what is wrong.
+BakedFrame read_baked(const std::filesystem::path& path);
+
+}  // namespace th::bake
