@@ -98,8 +98,14 @@ int main(int argc, char** argv) {
         ->check(th::app::at_least(0));
     cli.add_option("--max-size", o.max_size, "largest image side a request may ask for")
         ->check(th::app::in_range(16, 4096));
+    bool no_bake = false;
+    cli.add_flag("--no-bake", no_bake,
+                 "do not bake frames: views while moving come from the network (small, slow)");
+    cli.add_option("--bake-voxel", o.bake_voxel, "bake: grid spacing in metres")
+        ->check(CLI::Range(0.001, 0.2));
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     for (const auto& name : o.allow_hosts) th::viewer::allowed_host(name);
+    o.bake = !no_bake;
     th::app::apply_model_options(model, options);
 
     const auto ctx = th::app::start_run(options, "transhuman-view");

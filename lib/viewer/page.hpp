@@ -1,8 +1,10 @@
 #pragma once
 // The page transhuman-view serves: the rendered person in an <img>, the camera dragged with
 // three.js's OrbitControls (orbit, zoom, pan around the body's centre; no WebGL is needed),
-// progressive requests (small and fast while moving, full size when the camera rests), a frame
-// slider, a person selector, snaps to the dataset cameras and the reference views.
+// progressive requests (while moving: views of the frame's bake at full size, or small and fast
+// network views until the bake is ready; full size from the network when the camera rests), the
+// bake's progress, a frame slider, a person selector, snaps to the dataset cameras and the
+// reference views.
 
 namespace th::viewer {
 
@@ -37,11 +39,13 @@ button { margin: 2px; }
 <div id="row"><div id="stage"><img id="view" alt="rendered view"></div>
 <div id="truth" hidden><img id="truth-img" alt="ground truth"><div id="score"></div></div></div>
 <div id="status">loading</div>
+<div id="bake"></div>
 <div id="refs">reference views: </div>
 <script>
 'use strict';
 const $ = (id) => document.getElementById(id);
-const state = { client: Math.random().toString(36).slice(2), info: null, frame: null, human: 0, frames: [], seq: 0, shown: 0, size: [512, 512], timer: 0 };
+const state = { client: Math.random().toString(36).slice(2), info: null, frame: null, human: 0, frames: [], seq: 0, shown: 0, size: [512, 512], timer: 0, baked: {} };
+const frameKey = () => state.human + '/' + state.frames[$('frame').value];
 const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
 let controls = null;
 
@@ -51,13 +55,15 @@ async function json(url) {
   return r.json();
 }
 
-// Asks for a view: 'fast' while moving (128 px, 16 samples), 'mid' first when the camera rests
-// on a large view (256 px, at most 32 samples), then 'full' (the view's size and samples).
+// Asks for a view: while moving 'baked' (the frame's bake, the view's size) or, until the bake is
+// ready, 'fast' (128 px, 16 samples); when the camera rests 'mid' first on a large view (256 px,
+// at most 32 samples), then 'full' (the view's size and samples).
 async function request(level) {
-  const fast = level === 'fast';
+  const fast = level === 'fast' || level === 'baked';
   const seq = ++state.seq;
   const [w0, h0] = state.size;
-  const side = { fast: 128, mid: 256, full: Infinity }[level];
+  const key = frameKey();
+  const side = { fast: 128, mid: 256, full: Infinity, baked: Infinity }[level];
   const scale = Math.min(1, side / Math.max(w0, h0));
   const w = Math.max(8, Math.round(w0 * scale)), h = Math.max(8, Math.round(h0 * scale));
   const dir = new THREE.Vector3();
@@ -67,11 +73,13 @@ async function request(level) {
     human: state.human, frame: state.frames[$('frame').value], eye: v(camera.position), forward: v(dir),
     up: v(camera.up), fovy: camera.fov.toFixed(4), width: w, height: h, mode: $('mode').value, seq,
     client: state.client });
-  if (fast) params.set('samples', 16);
+  if (level === 'fast') params.set('samples', 16);
   if (level === 'mid') params.set('samples', Math.min(32, state.info.samples));
+  if (level === 'baked') { params.set('baked', 1); params.set('format', 'jpeg'); }
   const t0 = performance.now();
   const r = await fetch('api/render?' + params);
   if (r.status === 409) return;  // a newer request took over
+  if (level === 'baked' && r.status === 404) { state.baked[key] = false; return request('fast'); }
   if (!r.ok) { $('status').textContent = 'error: ' + (await r.text()); return; }
   const blob = await r.blob();
   if (seq < state.shown) return;
@@ -83,7 +91,7 @@ async function request(level) {
   img.src = URL.createObjectURL(blob);
   img.dataset.seq = seq;
   img.dataset.size = w + 'x' + h;
-  $('status').textContent = { fast: 'moving', mid: 'refining', full: 'refined' }[level] + ': ' + w + 'x' + h + ' in ' +
+  $('status').textContent = { fast: 'moving', baked: 'moving (baked)', mid: 'refining', full: 'refined' }[level] + ': ' + w + 'x' + h + ' in ' +
       Math.round(performance.now() - t0) + ' ms';
   document.body.dataset.rendered = String(Number(document.body.dataset.rendered || 0) + 1);
 }
@@ -100,7 +108,15 @@ async function refine() {
 function moved() {
   $('truth').hidden = true;
   state.moves = (state.moves || 0) + 1;
-  request('fast');
+  if (!state.baked[frameKey()]) request('fast');
+  else if (state.inflight) state.pending = true;  // one baked view at a time, the latest camera next
+  else {
+    state.inflight = true;
+    request('baked').finally(() => {
+      state.inflight = false;
+      if (state.pending) { state.pending = false; moved(); }
+    });
+  }
   clearTimeout(state.timer);
   state.timer = setTimeout(refine, 250);
 }
@@ -135,6 +151,28 @@ async function showTruth(c) {
   $('score').textContent = 'ground truth, camera ' + c + ': PSNR ' + r.psnr.toFixed(2) + ' dB, SSIM ' +
       r.ssim.toFixed(3) + ' (as transhuman-eval scores it)';
   document.body.dataset.psnr = r.psnr;
+}
+
+// The frame's bake (started by the first ask): its progress, then views while moving come from it.
+async function watchBake() {
+  if (!state.info.bake) return;
+  const key = frameKey(), frame = state.frames[$('frame').value];
+  for (;;) {
+    let r;
+    try { r = await json('api/bake?human=' + state.human + '&frame=' + frame); } catch (e) {
+      $('bake').textContent = 'bake: ' + e.message; return; }
+    if (key !== frameKey()) return;  // another frame is shown now
+    if (r.state === 'ready') {
+      state.baked[key] = true;
+      $('bake').textContent = 'frame ' + frame + ' baked (' + (r.voxel * 100).toFixed(1) + ' cm grid, ' + r.bricks +
+          ' bricks, ' + r.mib.toFixed(1) + ' MiB, ' + r.seconds.toFixed(1) + ' s): views while moving come from the bake';
+      document.body.dataset.baked = key;
+      return;
+    }
+    if (r.state === 'failed') { $('bake').textContent = 'bake failed: ' + r.error; return; }
+    $('bake').textContent = 'baking frame ' + frame + ' for real-time views: ' + Math.round(100 * r.progress) + '%';
+    await new Promise((ok) => setTimeout(ok, 300));
+  }
 }
 
 async function loadFrame() {
@@ -177,10 +215,11 @@ async function start() {
     await loadFrame();
     snap(Math.min(state.info.view, state.frame.cameras.length - 1));
   };
-  sel.onchange = () => choose();
-  $('frame').oninput = async () => { await loadFrame(); refine(); };
+  sel.onchange = () => choose().then(watchBake);
+  $('frame').oninput = async () => { await loadFrame(); refine(); watchBake(); };
   $('mode').onchange = () => refine();
   await choose(true);
+  watchBake();
 }
 // ?selftest=drag (for tests): once the first view is shown, drags the camera 120 px with
 // dispatched mouse events and reports in <body data-selftest> whether fast views came while
@@ -204,7 +243,29 @@ async function selftest() {
   const changed = before.length !== after.length || before.some((b, i) => b !== after[i]);
   document.body.dataset.selftest = 'fast views while moving: ' + fast + '; refined: yes; image changed: ' + (changed ? 'yes' : 'no');
 }
-if (new URLSearchParams(location.search).get('selftest') === 'drag') selftest();
+// ?selftest=fps&seconds=S (benchmarks): once the frame is baked, drags the camera for S seconds
+// (a mouse move every 16 ms) and reports in <body data-fps> the views shown per second.
+async function selftestFps(seconds) {
+  const until = (cond) => new Promise((ok) => { const t = setInterval(() => { if (cond()) { clearInterval(t); ok(); } }, 20); });
+  await until(() => Number(document.body.dataset.rendered || 0) >= 1 && document.body.dataset.baked);
+  await new Promise((ok) => setTimeout(ok, 1000));  // the refined view of the snap
+  const stage = $('stage'), box = stage.getBoundingClientRect();
+  const at = (dx) => ({ clientX: box.left + box.width / 2 + dx, clientY: box.top + box.height / 2, button: 0, bubbles: true });
+  stage.dispatchEvent(new MouseEvent('mousedown', at(0)));
+  const shown0 = Number(document.body.dataset.rendered), t0 = performance.now();
+  let dx = 0;
+  while (performance.now() - t0 < 1000 * seconds) {
+    dx += 2;
+    document.dispatchEvent(new MouseEvent('mousemove', at(dx % 400 - 200)));
+    await new Promise((ok) => setTimeout(ok, 16));
+  }
+  const shown = Number(document.body.dataset.rendered) - shown0, elapsed = (performance.now() - t0) / 1000;
+  document.dispatchEvent(new MouseEvent('mouseup', at(0)));
+  document.body.dataset.fps = (shown / elapsed).toFixed(1) + ' views/s (' + shown + ' in ' + elapsed.toFixed(1) + ' s, ' + $('view').dataset.size + ')';
+}
+const query = new URLSearchParams(location.search);
+if (query.get('selftest') === 'drag') selftest();
+if (query.get('selftest') === 'fps') selftestFps(Number(query.get('seconds') || 4));
 start().catch((e) => { $('status').textContent = 'error: ' + e.message; document.body.dataset.error = e.message; });
 </script>
 </body>

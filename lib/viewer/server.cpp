@@ -18,12 +18,15 @@
 #include <opencv2/imgproc.hpp>
 #include <optional>
 #include <sstream>
+#include <thread>
 
+#include "bake/bake.hpp"
 #include "core/error.hpp"
 #include "report/report.hpp"
 #include "viewer/access.hpp"
 #include "viewer/listener.hpp"
 #include "viewer/page.hpp"
+#include "viewer/recent.hpp"
 
 namespace th::viewer {
 namespace fs = std::filesystem;
@@ -130,8 +133,9 @@ Json vec3_json(const torch::Tensor& v) {
   return Json::array({c[0].item<double>(), c[1].item<double>(), c[2].item<double>()});
 }
 
-// (H, W, 3) float RGB in [0, 1], or (H, W) values in [0, 1] shown as grey, as PNG bytes.
-std::string png(const torch::Tensor& image) {
+// (H, W, 3) float RGB in [0, 1], or (H, W) values in [0, 1] shown as grey, as PNG bytes (or
+// JPEG at quality 90 with `jpeg`: a few times faster to make, for views shown while moving).
+std::string png(const torch::Tensor& image, bool jpeg = false) {
   auto u8 = (image.clamp(0, 1) * 255).round().to(torch::kUInt8).contiguous();
   const int h = int(u8.size(0)), w = int(u8.size(1)), c = u8.dim() == 3 ? 3 : 1;
   cv::Mat m(h, w, c == 3 ? CV_8UC3 : CV_8UC1, u8.data_ptr<uint8_t>());
@@ -141,9 +145,37 @@ std::string png(const torch::Tensor& image) {
   else
     out = m;
   std::vector<uchar> bytes;
-  cv::imencode(".png", out, bytes);
+  if (jpeg)
+    cv::imencode(".jpg", out, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
+  else
+    cv::imencode(".png", out, bytes);
   return std::string(bytes.begin(), bytes.end());
 }
+
+// What a view shows: its colours, or depth (near light, far dark, black where nothing is) or
+// accumulated opacity as grey.
+torch::Tensor display(const torch::Tensor& rgb, const torch::Tensor& depth_in,
+                      const torch::Tensor& acc, const std::string& mode) {
+  if (mode == "rgb") return rgb;
+  if (mode == "acc") return acc;
+  const auto valid = acc > 1e-3;
+  auto depth = depth_in.clone();
+  if (valid.any().item<bool>()) {
+    const auto d = depth.index({valid});
+    const double lo = d.min().item<double>(), hi = d.max().item<double>();
+    depth = torch::where(valid, 1.0 - (depth - lo) / std::max(hi - lo, 1e-6) * 0.8,
+                         torch::zeros_like(depth));
+  }
+  return depth;
+}
+
+// A frame's bake as the page sees it: under way (with its progress), ready, or failed.
+struct BakeState {
+  std::string state = "baking";  // baking | ready | failed
+  double progress = 0, seconds = 0;
+  std::string error;
+  std::shared_ptr<const bake::BakedFrame> baked;
+};
 
 // Why a render or a wait for the renderer ends early: nullopt while it may go on.
 using Interruption = std::function<std::optional<HttpError>()>;
@@ -151,7 +183,13 @@ using Interruption = std::function<std::optional<HttpError>()>;
 class Viewer {
  public:
   Viewer(const Session& session, const Options& options, const std::atomic<bool>& stopping)
-      : session_(session), options_(options), stopping_(stopping) {}
+      : session_(session), options_(options), stopping_(stopping) {
+    bake_options_.voxel = options.bake_voxel;
+    bake::check_options(bake_options_);
+  }
+  ~Viewer() {
+    for (auto& t : bakers_) t.join();  // they end soon once the viewer stops
+  }
 
   std::string info() const {
     Json humans = Json::array();
@@ -168,6 +206,8 @@ class Viewer {
     answer["view"] = options_.view;
     answer["max_samples"] = kMaxSamples;
     answer["render_timeout_s"] = options_.render_timeout_s;
+    answer["bake"] = options_.bake;
+    answer["bake_voxel"] = options_.bake_voxel;
     answer["start"] = {{"human", options_.start_human}, {"frame", options_.start_frame}};
     return body(answer);
   }
@@ -241,6 +281,12 @@ class Viewer {
     const std::string mode = req.has_param("mode") ? req.get_param_value("mode") : "rgb";
     if (mode != "rgb" && mode != "depth" && mode != "acc")
       throw BadRequest{"'mode' = '" + mode + "' must be rgb, depth or acc"};
+    const std::string format = req.has_param("format") ? req.get_param_value("format") : "png";
+    if (format != "png" && format != "jpeg")
+      throw BadRequest{"'format' = '" + format + "' must be png or jpeg"};
+    const bool baked = req.has_param("baked") && int_param(req, "baked", 0, 1) == 1;
+    if (baked && snap >= 0)
+      throw BadRequest{"'baked' views take eye..height, not 'camera' (a snap renders exactly)"};
     th::video::PathCamera camera;
     if (snap < 0) {
       const double fovy = number("fovy", param(req, "fovy"));
@@ -268,6 +314,20 @@ class Viewer {
         return HttpError{409, "cancelled by a newer request"};
       return std::nullopt;
     };
+    if (baked) {
+      // From the frame's bake: no network, so no wait for the renderer; a newer request of the
+      // same page (seq above) already tells an exact render in flight to stop.
+      const auto frame = baked_frame(h, f);
+      if (!frame)
+        throw HttpError{404, "frame " + std::to_string(f) + " of person " + std::to_string(h) +
+                                 " is not baked (GET /api/bake starts its bake)"};
+      bake::MarchOptions march;
+      march.samples = samples > 0 ? samples : session_.config().render.samples;
+      march.termination = session_.config().render.termination_transmittance;
+      const auto img =
+          bake::render_baked(*frame, camera.K, camera.R, camera.T, width, height, march);
+      return png(display(img.rgb, img.depth, img.acc, mode), format == "jpeg");
+    }
     const auto lock = render_lock(interrupted);
     const auto started = Clock::now();
     const auto prepared = prepared_frame(h, f);
@@ -298,17 +358,36 @@ class Viewer {
       if (client_gone()) spdlog::info("viewer: a render was cancelled, its client went away");
       throw *stopped;
     }
-    if (mode == "rgb") return png(images->rgb);
-    if (mode == "acc") return png(images->acc);
-    const auto valid = images->acc > 1e-3;
-    auto depth = images->depth.clone();
-    if (valid.any().item<bool>()) {
-      const auto d = depth.index({valid});
-      const double lo = d.min().item<double>(), hi = d.max().item<double>();
-      depth = torch::where(valid, 1.0 - (depth - lo) / std::max(hi - lo, 1e-6) * 0.8,
-                           torch::zeros_like(depth));
+    return png(display(images->rgb, images->depth, images->acc, mode), format == "jpeg");
+  }
+
+  // The bake of a frame: started in the background when first asked for (with --bake), then its
+  // progress, until it is ready or failed.
+  std::string bake_json(const httplib::Request& req) {
+    const auto [h, f] = person_frame(req);
+    if (!options_.bake) throw HttpError{404, "baking is off (transhuman-view --no-bake)"};
+    std::shared_ptr<BakeState> state;
+    {
+      std::lock_guard<std::mutex> lock(bakes_mutex_);
+      if (auto* found = bakes_.find({h, f})) {
+        state = *found;
+      } else {
+        state = bakes_.put({h, f}, std::make_shared<BakeState>());
+        bakers_.emplace_back([this, h = h, f = f, state] { run_bake(h, f, state); });
+      }
     }
-    return png(depth);
+    Json answer;
+    std::lock_guard<std::mutex> lock(bakes_mutex_);
+    answer["state"] = state->state;
+    answer["progress"] = state->progress;
+    answer["voxel"] = options_.bake_voxel;
+    if (state->state == "ready") {
+      answer["seconds"] = state->seconds;
+      answer["bricks"] = state->baked->stored_bricks();
+      answer["mib"] = double(state->baked->bytes()) / 1048576.0;
+    }
+    if (state->state == "failed") answer["error"] = state->error;
+    return body(answer);
   }
 
  private:
@@ -351,40 +430,77 @@ class Viewer {
     const auto key = std::make_pair(h, f);
     {
       std::lock_guard<std::mutex> lock(frames_mutex_);
-      if (const auto it = data_.find(key); it != data_.end()) return it->second;
+      if (const auto* found = data_.find(key)) return *found;
     }
     auto frame = std::make_shared<PreparedFrame>();
     frame->human = h;
     frame->frame = f;
     frame->sample = session_.dataset().load_item({h, f, options_.view}, 0);
     std::lock_guard<std::mutex> lock(frames_mutex_);
-    if (data_.size() >= 8) data_.erase(data_.begin());
-    return data_.emplace(key, std::move(frame)).first->second;
+    return data_.put(key, std::move(frame));
   }
 
   // The frame cache: preparing a frame (encoder, tokens) is paid once per frame shown. Called
   // with the renderer held.
   std::shared_ptr<const PreparedFrame> prepared_frame(int h, int f) {
     const auto key = std::make_pair(h, f);
-    auto it = prepared_.find(key);
-    if (it == prepared_.end()) {
-      if (prepared_.size() >= 4) prepared_.erase(prepared_.begin());
-      it =
-          prepared_
-              .emplace(key,
-                       std::make_shared<const PreparedFrame>(session_.prepare(h, f, options_.view)))
-              .first;
+    if (const auto* found = prepared_.find(key)) return *found;
+    return prepared_.put(
+        key, std::make_shared<const PreparedFrame>(session_.prepare(h, f, options_.view)));
+  }
+
+  // The frame's bake when it is ready, else null.
+  std::shared_ptr<const bake::BakedFrame> baked_frame(int h, int f) {
+    std::lock_guard<std::mutex> lock(bakes_mutex_);
+    const auto* found = bakes_.find({h, f});
+    return found && (*found)->state == "ready" ? (*found)->baked : nullptr;
+  }
+
+  // A bake in the background: it waits for the renderer (the network runs for one request at
+  // a time) and holds it while it runs; exact requests wait behind it as behind a render.
+  void run_bake(int h, int f, const std::shared_ptr<BakeState>& state) {
+    const auto started = Clock::now();
+    auto finish = [&](const std::string& outcome, const std::string& error,
+                      std::shared_ptr<const bake::BakedFrame> baked) {
+      std::lock_guard<std::mutex> lock(bakes_mutex_);
+      state->state = outcome;
+      state->error = error;
+      state->baked = std::move(baked);
+      state->seconds = std::chrono::duration<double>(Clock::now() - started).count();
+    };
+    try {
+      std::unique_lock<std::timed_mutex> lock(render_mutex_, std::defer_lock);
+      while (!lock.try_lock_for(std::chrono::milliseconds(50)))
+        if (stopping_.load()) return finish("failed", "the viewer is stopping", nullptr);
+      const auto prepared = prepared_frame(h, f);
+      auto baked = bake::bake_frame(session_, *prepared, bake_options_, nullptr, [&](double p) {
+        if (stopping_.load()) throw HttpError{503, "the viewer is stopping"};
+        std::lock_guard<std::mutex> guard(bakes_mutex_);
+        state->progress = p;
+      });
+      spdlog::info("viewer: baked {} frame {} in {:.1f} s ({} bricks, {:.1f} MiB)", baked.human,
+                   baked.frame, std::chrono::duration<double>(Clock::now() - started).count(),
+                   baked.stored_bricks(), double(baked.bytes()) / 1048576.0);
+      finish("ready", "", std::make_shared<const bake::BakedFrame>(std::move(baked)));
+    } catch (const HttpError& e) {
+      finish("failed", e.message, nullptr);
+    } catch (const std::exception& e) {
+      spdlog::error("viewer: the bake of person {} frame {} failed: {}", h, f, e.what());
+      finish("failed", e.what(), nullptr);
     }
-    return it->second;
   }
 
   const Session& session_;
   const Options options_;
   const std::atomic<bool>& stopping_;
-  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>>
-      prepared_;                                                              // with render_mutex_
-  std::map<std::pair<int, int>, std::shared_ptr<const PreparedFrame>> data_;  // with frames_mutex_
+  bake::BakeOptions bake_options_;
+  using FrameKey = std::pair<int, int>;                                 // person, frame
+  Recent<FrameKey, std::shared_ptr<const PreparedFrame>> prepared_{4};  // with render_mutex_
+  Recent<FrameKey, std::shared_ptr<const PreparedFrame>> data_{8};      // with frames_mutex_
   std::mutex frames_mutex_;
+  Recent<FrameKey, std::shared_ptr<BakeState>> bakes_{4};  // with bakes_mutex_
+  std::mutex bakes_mutex_;
+  std::vector<std::thread> bakers_;  // with bakes_mutex_; joined at the end
   std::timed_mutex render_mutex_;
   std::map<std::string, uint64_t> latest_;  // per client: the newest request seen
   std::mutex latest_mutex_;
@@ -401,6 +517,7 @@ std::string read_file(const fs::path& path) {
 
 struct Server::Impl {
   Impl(const Session& session, const Options& o) : options(o), viewer(session, o, stopping) {}
+  ~Impl() { stopping = true; }  // background bakes end before the viewer goes
   Options options;
   std::atomic<bool> stopping{false};
   Viewer viewer;
@@ -493,10 +610,15 @@ Server::Server(const Session& session, const Options& options)
              guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
                res.set_content(viewer.ground_truth(req), "image/png");
              }));
+  server.Get("/api/bake", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
+               res.set_header("Cache-Control", "no-store");
+               res.set_content(viewer.bake_json(req), "application/json");
+             }));
   server.Get("/api/render", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
                const auto image = viewer.render(req, Listener::client_gone);
                res.set_header("Cache-Control", "no-store");
-               res.set_content(image, "image/png");
+               const bool jpeg = req.has_param("format") && req.get_param_value("format") == "jpeg";
+               res.set_content(image, jpeg ? "image/jpeg" : "image/png");
              }));
 
   // An empty --host means every interface, as it does for most servers (getaddrinfo would

@@ -10,13 +10,19 @@
 //                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C instead
 //                   of
 //                         eye..height renders dataset camera C exactly
+//   GET /api/bake?human=H&frame=F   starts the frame's bake in the background (METHOD 7.1) and
+//                         says how far it is: {"state": baking|ready|failed, "progress", ...}
+//   GET /api/render?...&baked=1   the view from the frame's bake (404 until it is ready): no
+//                         network, milliseconds; format=jpeg for a JPEG instead of a PNG
 //   GET /api/reference?human=H&frame=F&index=I                    reference view I (PNG)
 //   GET /api/evaluate?human=H&frame=F&camera=C   dataset camera C scored as transhuman-eval
 //                         scores it: {"psnr", "ssim"} (JSON)
 //   GET /api/ground_truth?human=H&frame=F&camera=C                its ground truth (PNG)
 // One render runs at a time; a request with a higher seq from the same page (client=ID) cancels
 // that page's request in flight (409 for the cancelled one), so a dragged camera never waits
-// behind stale frames. Prepared frames are kept, so only a frame's first view pays for them.
+// behind stale frames. Prepared frames and bakes are kept (the least recently used go first), so
+// only a frame's first view pays for them. A bake holds the renderer while it runs; baked views
+// never wait for it.
 // A render is bounded: image side (max_size), samples (4096) and time (render_timeout_s, then
 // 503 naming the bound); it is cancelled between bands of rows when its client goes away or the
 // server stops. A request waiting for the renderer gets 503 with Retry-After when it has waited
@@ -45,6 +51,8 @@ struct Options {
   int max_size = 512;         // largest image side a request may ask for
   int start_human = 0;        // shown first
   int start_frame = -1;       // -1: the person's first test frame
+  bool bake = true;           // bake each frame shown, for views in milliseconds while moving
+  double bake_voxel = 0.02;   // the bake's grid spacing, metres
 };
 
 // `name` as the Host header carries it (lower case, IPv6 in brackets); throws th::Error unless
