@@ -268,7 +268,6 @@ int main(int argc, char** argv) {
     fs::path out;
     int items = 0, repeat = 10, orbit_views = 36;
     double speed_voxel = 0.02;
-    bool force = false;
     cli.add_option("--config", setup.config, "the config (the checkpoint's)")->required();
     cli.add_option("--checkpoint", setup.checkpoint, "a trained checkpoint")->required();
     cli.add_option("--voxels", voxel_list, "accuracy: bake spacings in metres, comma-separated");

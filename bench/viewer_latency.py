@@ -2,11 +2,16 @@
 """Latency of transhuman-view on a trained checkpoint: for N drags around the person, the time
 from a camera move to its fast image (128 px on the long side, 16 samples, what the page asks
 for while the camera moves) and to its refined image (the view's full size at the configured
-samples, what the page asks for when the camera rests); and the server's memory. Prints the
-figures and appends them to bench/results/viewer.md.
+samples, what the page asks for when the camera rests); the frame's bake (from /api/bake's first
+ask until it is ready) and a baked view at the full size after a move (what the page asks for
+while moving once the frame is baked); in headless Chromium, the views the page shows per
+second while the camera is dragged (its ?selftest=fps, a mouse move every 16 ms); and the
+server's memory. Prints the figures and appends them to bench/results/viewer.md; --screenshots
+DIR also saves the page mid-drag and at rest.
 
   bench/viewer_latency.py --checkpoint runs/demo/checkpoints/latest.pt [--config configs/demo.yaml]
-                          [--drags 20] [--refined 5] [--bin build/apps] [-- overrides...]
+                          [--drags 20] [--refined 5] [--bin build/apps] [--fps-seconds 5]
+                          [--screenshots DIR] [-- overrides...]
 """
 import argparse
 import datetime
@@ -30,6 +35,8 @@ def main():
     ap.add_argument('--drags', type=int, default=20)
     ap.add_argument('--refined', type=int, default=5, help='drags that also wait for the refined image')
     ap.add_argument('--threads', type=int, default=2)
+    ap.add_argument('--fps-seconds', type=float, default=5, help='length of the drag in Chromium (0: none)')
+    ap.add_argument('--screenshots', default='', help='folder for the page mid-drag and at rest (PNG)')
     ap.add_argument('overrides', nargs='*')
     args = ap.parse_args()
     with socket.socket() as s:
@@ -56,7 +63,12 @@ def main():
         w0, h0 = int(cam['width']), int(cam['height'])
         scale = min(1.0, 128 / max(w0, h0))
         fast_wh = (max(8, round(w0 * scale)), max(8, round(h0 * scale)))
-        fast, refined, seq = [], [], 0
+        t0 = time.perf_counter()
+        while json.loads(get('/api/bake', {'human': 0, 'frame': frame}))['state'] == 'baking':
+            time.sleep(0.05)
+        bake = json.loads(get('/api/bake', {'human': 0, 'frame': frame}))
+        bake_seconds = time.perf_counter() - t0
+        fast, refined, baked, seq = [], [], [], 0
         # Rotate the eye about the up axis through the centre: one drag step per 10 degrees.
         u = [x / math.sqrt(sum(y * y for y in up)) for x in up]
         for k in range(args.drags):
@@ -73,12 +85,18 @@ def main():
             t0 = time.perf_counter()
             get('/api/render', {**q, 'width': fast_wh[0], 'height': fast_wh[1], 'samples': 16, 'seq': seq})
             fast.append(time.perf_counter() - t0)
+            if bake['state'] == 'ready':
+                seq += 1
+                t0 = time.perf_counter()
+                get('/api/render', {**q, 'width': w0, 'height': h0, 'baked': 1, 'format': 'jpeg', 'seq': seq})
+                baked.append(time.perf_counter() - t0)
             if k < args.refined:
                 seq += 1
                 t1 = time.perf_counter()
                 get('/api/render', {**q, 'width': w0, 'height': h0, 'seq': seq})
                 refined.append(time.perf_counter() - t0)  # from the move, as the user waits
                 _ = t1
+        fps = chromium_fps(base, args.fps_seconds, args.screenshots) if args.fps_seconds > 0 else None
         with open(f'/proc/{server.pid}/status') as f:
             mem = {l.split(':')[0]: l.split(':')[1].strip() for l in f if l.startswith(('VmRSS', 'VmHWM'))}
     finally:
@@ -97,6 +115,11 @@ def main():
         f'- first view of the frame (its preparation, via /api/frame): {prepare:.2f} s',
         f'- fast image ({fast_wh[0]}x{fast_wh[1]}, 16 samples) after a move: {fmt(fast)}',
         f'- refined image ({w0}x{h0}, {info["samples"]} samples) after a move: {fmt(refined)}',
+        f'- the frame\'s bake (/api/bake until ready): {bake_seconds:.2f} s, {bake["state"]}'
+        + (f', {bake["bricks"]} bricks, {bake["mib"]:.1f} MiB, {100 * bake["voxel"]:.1f} cm grid' if bake['state'] == 'ready' else ''),
+        f'- baked image ({w0}x{h0}, JPEG) after a move: '
+        + (f'median {1e3 * statistics.median(baked):.1f} ms, worst {1e3 * max(baked):.1f} ms ({len(baked)} drags)' if baked else 'none'),
+        f'- in headless Chromium while dragging: {fps or "not measured"}',
         f'- server memory: resident {mem.get("VmRSS")}, peak {mem.get("VmHWM")}',
         '',
     ]
@@ -110,6 +133,53 @@ def main():
             f.write('# transhuman-view latency (bench/viewer_latency.py)\n\n')
         f.write(text + '\n')
     return 0
+
+
+def chromium_fps(base, seconds, shots):
+    """The page's ?selftest=fps in headless Chromium, in real time: the title it sets when done,
+    read from Chromium's DevTools list of pages."""
+    import shutil
+    import tempfile
+    browser = shutil.which('chromium') or shutil.which('chromium-browser')
+    if not browser:
+        return 'Chromium not installed'
+    flags = ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+             '--disable-background-networking', '--disable-component-update', '--disable-sync',
+             '--window-size=1100,800']
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        port = s.getsockname()[1]
+    result = 'the page reported nothing'
+    with tempfile.TemporaryDirectory() as profile:
+        proc = subprocess.Popen([browser, *flags, '--user-data-dir=' + profile, f'--remote-debugging-port={port}',
+                                 f'{base}/?selftest=fps&seconds={seconds}'],
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.time() + seconds + 120
+            while time.time() < deadline:
+                time.sleep(0.5)
+                try:
+                    pages = json.loads(urllib.request.urlopen(f'http://127.0.0.1:{port}/json/list', timeout=5).read())
+                except OSError:
+                    continue
+                titles = [p.get('title', '') for p in pages if p.get('type') == 'page']
+                done = [t for t in titles if t.startswith('fps: ')]
+                if done:
+                    result = done[0][5:]
+                    break
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+        if shots:
+            os.makedirs(shots, exist_ok=True)
+            # Mid-drag: a long drag, the picture taken inside it; at rest: the refined view.
+            # (Virtual time: it stands still while a request is answered, so the drag's many
+            # baked views take real seconds per virtual one.)
+            for name, url, budget in (('viewer_dragging.png', f'{base}/?selftest=fps&seconds=600', 4000),
+                                      ('viewer_at_rest.png', f'{base}/', 30000)):
+                subprocess.run([browser, *flags, '--user-data-dir=' + profile, f'--virtual-time-budget={budget}',
+                                '--screenshot=' + os.path.join(shots, name), url], capture_output=True, timeout=300)
+    return result
 
 
 if __name__ == '__main__':

@@ -244,7 +244,8 @@ async function selftest() {
   document.body.dataset.selftest = 'fast views while moving: ' + fast + '; refined: yes; image changed: ' + (changed ? 'yes' : 'no');
 }
 // ?selftest=fps&seconds=S (benchmarks): once the frame is baked, drags the camera for S seconds
-// (a mouse move every 16 ms) and reports in <body data-fps> the views shown per second.
+// (a mouse move every 16 ms) and reports the views shown per second in <body data-fps> and the
+// page's title.
 async function selftestFps(seconds) {
   const until = (cond) => new Promise((ok) => { const t = setInterval(() => { if (cond()) { clearInterval(t); ok(); } }, 20); });
   await until(() => Number(document.body.dataset.rendered || 0) >= 1 && document.body.dataset.baked);
@@ -262,6 +263,7 @@ async function selftestFps(seconds) {
   const shown = Number(document.body.dataset.rendered) - shown0, elapsed = (performance.now() - t0) / 1000;
   document.dispatchEvent(new MouseEvent('mouseup', at(0)));
   document.body.dataset.fps = (shown / elapsed).toFixed(1) + ' views/s (' + shown + ' in ' + elapsed.toFixed(1) + ' s, ' + $('view').dataset.size + ')';
+  document.title = 'fps: ' + document.body.dataset.fps;  // readable without a DOM dump
 }
 const query = new URLSearchParams(location.search);
 if (query.get('selftest') === 'drag') selftest();

@@ -7,6 +7,8 @@ Starts the viewer on a free port of 127.0.0.1 and checks:
     (camera=C) is the same image, byte for byte, as `transhuman-render --camera C`;
   - a snapped camera's PSNR and SSIM (/api/evaluate) equal transhuman-eval's for that view;
   - depth and opacity displays; a request older than one already seen is answered 409;
+  - the frame's bake (/api/bake) gets ready, then baked views come as JPEG or PNG; an unbaked
+    frame's baked view is 404;
   - bad requests get 400 and a message naming the parameter; paths outside the API get 404;
   - in headless Chromium, a drag of the camera brings fast views, then a refined one, and the
     image changes (the page's ?selftest=drag dispatches the mouse events);
@@ -364,6 +366,28 @@ def main():
 
         status, ref = get(base, '/api/reference', {'human': 0, 'frame': frame, 'index': 0})
         check(status == 200 and png_size(ref) is not None, 'a reference view as PNG')
+
+        # The frame's bake: /api/bake starts it and reports its progress; once it is ready, baked
+        # views come as JPEG or PNG of the asked size; a frame not baked answers 404.
+        others = [f for h in info['humans'][:1] for f in h['frames'] if f != frame]
+        if others:
+            status, body = get(base, '/api/render', {**look, 'frame': others[0], 'baked': 1, 'seq': 200})
+            check(status == 404 and b'not baked' in body, f'a baked view of a frame not baked: 404 ({status})')
+        status, body = get(base, '/api/bake', {'human': 0, 'frame': frame})
+        bake = json.loads(body) if status == 200 else {}
+        check(status == 200 and bake.get('state') in ('baking', 'ready'), f'/api/bake starts the bake ({status}: {bake})')
+        deadline = time.time() + 300
+        while bake.get('state') == 'baking' and time.time() < deadline:
+            time.sleep(0.2)
+            bake = json.loads(get(base, '/api/bake', {'human': 0, 'frame': frame})[1])
+        check(bake.get('state') == 'ready' and bake.get('bricks', 0) > 0 and bake.get('progress') == 1,
+              f'the bake is ready ({bake})')
+        status, img = get(base, '/api/render', {**look, 'baked': 1, 'format': 'jpeg', 'seq': 201})
+        check(status == 200 and img[:3] == b'\xff\xd8\xff', f'a baked view as JPEG ({status})')
+        status, img = get(base, '/api/render', {**look, 'baked': 1, 'mode': 'depth', 'seq': 202})
+        check(status == 200 and png_size(img) == (40, 30), f'a baked depth view as a 40x30 PNG ({status})')
+        status, body = get(base, '/api/render', {'human': 0, 'frame': frame, 'camera': 3, 'baked': 1, 'seq': 203})
+        check(status == 400 and b"'baked' views take eye..height" in body, f'a baked snap is refused ({status})')
 
         bad = [
             ({k: x for k, x in look.items() if k != 'eye'}, "missing parameter 'eye'"),
