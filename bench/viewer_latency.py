@@ -6,12 +6,11 @@ samples, what the page asks for when the camera rests); the frame's bake (from /
 ask until it is ready) and a baked view at the full size after a move (what the page asks for
 while moving once the frame is baked); in headless Chromium, the views the page shows per
 second while the camera is dragged (its ?selftest=fps, a mouse move every 16 ms); and the
-server's memory. Prints the figures and appends them to bench/results/viewer.md; --screenshots
-DIR also saves the page mid-drag and at rest.
+server's memory. Prints the figures and appends them to bench/results/viewer.md.
 
   bench/viewer_latency.py --checkpoint runs/demo/checkpoints/latest.pt [--config configs/demo.yaml]
                           [--drags 20] [--refined 5] [--bin build/apps] [--fps-seconds 5]
-                          [--screenshots DIR] [-- overrides...]
+                          [-- overrides...]
 """
 import argparse
 import datetime
@@ -36,7 +35,6 @@ def main():
     ap.add_argument('--refined', type=int, default=5, help='drags that also wait for the refined image')
     ap.add_argument('--threads', type=int, default=2)
     ap.add_argument('--fps-seconds', type=float, default=5, help='length of the drag in Chromium (0: none)')
-    ap.add_argument('--screenshots', default='', help='folder for the page mid-drag and at rest (PNG)')
     ap.add_argument('overrides', nargs='*')
     args = ap.parse_args()
     with socket.socket() as s:
@@ -96,7 +94,7 @@ def main():
                 get('/api/render', {**q, 'width': w0, 'height': h0, 'seq': seq})
                 refined.append(time.perf_counter() - t0)  # from the move, as the user waits
                 _ = t1
-        fps = chromium_fps(base, args.fps_seconds, args.screenshots) if args.fps_seconds > 0 else None
+        fps = chromium_fps(base, args.fps_seconds) if args.fps_seconds > 0 else None
         with open(f'/proc/{server.pid}/status') as f:
             mem = {l.split(':')[0]: l.split(':')[1].strip() for l in f if l.startswith(('VmRSS', 'VmHWM'))}
     finally:
@@ -135,7 +133,7 @@ def main():
     return 0
 
 
-def chromium_fps(base, seconds, shots):
+def chromium_fps(base, seconds):
     """The page's ?selftest=fps in headless Chromium, in real time: the title it sets when done,
     read from Chromium's DevTools list of pages."""
     import shutil
@@ -170,15 +168,6 @@ def chromium_fps(base, seconds, shots):
         finally:
             proc.terminate()
             proc.wait(timeout=30)
-        if shots:
-            os.makedirs(shots, exist_ok=True)
-            # Mid-drag: a long drag, the picture taken inside it; at rest: the refined view.
-            # (Virtual time: it stands still while a request is answered, so the drag's many
-            # baked views take real seconds per virtual one.)
-            for name, url, budget in (('viewer_dragging.png', f'{base}/?selftest=fps&seconds=600', 4000),
-                                      ('viewer_at_rest.png', f'{base}/', 30000)):
-                subprocess.run([browser, *flags, '--user-data-dir=' + profile, f'--virtual-time-budget={budget}',
-                                '--screenshot=' + os.path.join(shots, name), url], capture_output=True, timeout=300)
     return result
 
 
