@@ -14,6 +14,7 @@
 #include "data/rays.hpp"
 #include "render/volume.hpp"
 #include "support/test_env.hpp"
+#include "support/tiny_config.hpp"
 #include "train/trainer.hpp"
 #include "viewer/recent.hpp"
 
@@ -84,15 +85,6 @@ BakedFrame linear_grid(const LinearField& field, const std::array<double, 6>& bo
             }
       }
   return g;
-}
-
-th::Config tiny_config() {
-  const auto root = th::test::tiny_dataset();
-  return th::config::load<th::Config>(
-      "tests/configs/tiny_train.yaml",
-      {"data.root=" + root.string(), "data.split_file=" + (root / "split.yaml").string(),
-       "model.grouping.cache_dir=" + (root.parent_path() / "kmeans_cache").string(),
-       "train.val_views=0", "eval.setting=identity"});
 }
 
 }  // namespace
@@ -187,9 +179,11 @@ TEST_CASE("a baked frame survives its file, and a damaged file is refused naming
 
 TEST_CASE("a bake holds the network's density and colour at its lattice points", "[bake]") {
   const fs::path run = th::test::scratch_dir("bake_ckpt_" + std::to_string(::getpid()));
-  th::train::train(tiny_config(), torch::kCPU, {run, false, 2});
-  const th::inference::Session session(tiny_config(), torch::kCPU,
-                                       run / "checkpoints" / "latest.pt");
+  th::train::train(th::test::tiny_train_config({"train.val_views=0", "eval.setting=identity"}),
+                   torch::kCPU, {run, false, 2});
+  const th::inference::Session session(
+      th::test::tiny_train_config({"train.val_views=0", "eval.setting=identity"}), torch::kCPU,
+      run / "checkpoints" / "latest.pt");
   const auto frame = session.prepare(0, session.setting_frames(0).front(), 0);
   th::bake::BakeOptions options;
   options.voxel = 0.05;
