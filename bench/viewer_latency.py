@@ -9,7 +9,7 @@ second while the camera is dragged (its ?selftest=fps, a mouse move every 16 ms)
 server's memory. Prints the figures and appends them to bench/results/viewer.md.
 
   bench/viewer_latency.py --checkpoint runs/demo/checkpoints/latest.pt [--config configs/demo.yaml]
-                          [--drags 20] [--refined 5] [--bin build/apps] [--fps-seconds 5]
+                          [--drags 20] [--refined 5] [--bin build/apps] [--fps-seconds 10]
                           [-- overrides...]
 """
 import argparse
@@ -34,7 +34,7 @@ def main():
     ap.add_argument('--drags', type=int, default=20)
     ap.add_argument('--refined', type=int, default=5, help='drags that also wait for the refined image')
     ap.add_argument('--threads', type=int, default=2)
-    ap.add_argument('--fps-seconds', type=float, default=5, help='length of the drag in Chromium (0: none)')
+    ap.add_argument('--fps-seconds', type=float, default=10, help='length of the drag in Chromium (0: none)')
     ap.add_argument('overrides', nargs='*')
     args = ap.parse_args()
     with socket.socket() as s:
@@ -66,7 +66,7 @@ def main():
             time.sleep(0.05)
         bake = json.loads(get('/api/bake', {'human': 0, 'frame': frame}))
         bake_seconds = time.perf_counter() - t0
-        fast, refined, baked, seq = [], [], [], 0
+        fast, refined, baked, stages, seq = [], [], [], [], 0
         # Rotate the eye about the up axis through the centre: one drag step per 10 degrees.
         u = [x / math.sqrt(sum(y * y for y in up)) for x in up]
         for k in range(args.drags):
@@ -86,7 +86,10 @@ def main():
             if bake['state'] == 'ready':
                 seq += 1
                 t0 = time.perf_counter()
-                get('/api/render', {**q, 'width': w0, 'height': h0, 'baked': 1, 'format': 'jpeg', 'seq': seq})
+                with urllib.request.urlopen(base + '/api/render?' + urllib.parse.urlencode(
+                        {**q, 'width': w0, 'height': h0, 'baked': 1, 'format': 'jpeg', 'seq': seq}), timeout=600) as r:
+                    r.read()
+                    stages.append(dict(m.strip().split(';dur=') for m in r.headers['Server-Timing'].split(',')))
                 baked.append(time.perf_counter() - t0)
             if k < args.refined:
                 seq += 1

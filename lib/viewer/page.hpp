@@ -44,7 +44,7 @@ button { margin: 2px; }
 <script>
 'use strict';
 const $ = (id) => document.getElementById(id);
-const state = { client: Math.random().toString(36).slice(2), info: null, frame: null, human: 0, frames: [], seq: 0, shown: 0, size: [512, 512], timer: 0, baked: {} };
+const state = { client: Math.random().toString(36).slice(2), info: null, frame: null, human: 0, frames: [], seq: 0, shown: 0, size: [512, 512], timer: 0, baked: {}, inflight: 0, times: [] };
 const frameKey = () => state.human + '/' + state.frames[$('frame').value];
 const camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
 let controls = null;
@@ -82,15 +82,26 @@ async function request(level) {
   if (level === 'baked' && r.status === 404) { state.baked[key] = false; return request('fast'); }
   if (!r.ok) { $('status').textContent = 'error: ' + (await r.text()); return; }
   const blob = await r.blob();
+  const t1 = performance.now();
   if (seq < state.shown) return;
+  // Decoded before it is shown, so a view counts once it can be painted.
+  const url = URL.createObjectURL(blob);
+  const decoded = new Image();
+  decoded.src = url;
+  try { await decoded.decode(); } catch (e) { URL.revokeObjectURL(url); throw e; }
+  if (seq < state.shown) { URL.revokeObjectURL(url); return; }
   state.lastBytes = new Uint8Array(await blob.arrayBuffer());
   state.lastFast = fast;
   state.shown = seq;
   const img = $('view');
   if (img.src) URL.revokeObjectURL(img.src);
-  img.src = URL.createObjectURL(blob);
+  img.src = url;
   img.dataset.seq = seq;
   img.dataset.size = w + 'x' + h;
+  // Where the time went: the server's stages (its Server-Timing header), the round trip, the decode.
+  const server = Object.fromEntries((r.headers.get('Server-Timing') || '').split(',').map((m) => m.trim().split(';dur=')).filter((m) => m.length === 2).map(([k, v]) => [k, Number(v)]));
+  state.times.push({ level, trip: t1 - t0, decode: performance.now() - t1, ...server });
+  if (state.times.length > 1000) state.times.shift();
   $('status').textContent = { fast: 'moving', baked: 'moving (baked)', mid: 'refining', full: 'refined' }[level] + ': ' + w + 'x' + h + ' in ' +
       Math.round(performance.now() - t0) + ' ms';
   document.body.dataset.rendered = String(Number(document.body.dataset.rendered || 0) + 1);
@@ -109,11 +120,13 @@ function moved() {
   $('truth').hidden = true;
   state.moves = (state.moves || 0) + 1;
   if (!state.baked[frameKey()]) request('fast');
-  else if (state.inflight) state.pending = true;  // one baked view at a time, the latest camera next
+  // Two baked views in flight, so the server marches one while the page receives and decodes the
+  // other; past that, the latest camera waits for the next free place.
+  else if (state.inflight >= 2) state.pending = true;
   else {
-    state.inflight = true;
+    state.inflight += 1;
     request('baked').finally(() => {
-      state.inflight = false;
+      state.inflight -= 1;
       if (state.pending) { state.pending = false; moved(); }
     });
   }
@@ -262,7 +275,10 @@ async function selftestFps(seconds) {
   }
   const shown = Number(document.body.dataset.rendered) - shown0, elapsed = (performance.now() - t0) / 1000;
   document.dispatchEvent(new MouseEvent('mouseup', at(0)));
-  document.body.dataset.fps = (shown / elapsed).toFixed(1) + ' views/s (' + shown + ' in ' + elapsed.toFixed(1) + ' s, ' + $('view').dataset.size + ')';
+  const views = state.times.slice(-shown).filter((t) => t.level === 'baked');
+  const median = (key) => { const xs = views.map((t) => t[key]).filter((x) => x >= 0).sort((a, b) => a - b); return xs.length ? xs[xs.length >> 1].toFixed(1) : '?'; };
+  document.body.dataset.fps = (shown / elapsed).toFixed(1) + ' views/s (' + shown + ' in ' + elapsed.toFixed(1) + ' s, ' + $('view').dataset.size +
+      '); medians per view: round trip ' + median('trip') + ' ms (server: march ' + median('march') + ', encode ' + median('encode') + '), decode ' + median('decode') + ' ms';
   document.title = 'fps: ' + document.body.dataset.fps;  // readable without a DOM dump
 }
 const query = new URLSearchParams(location.search);

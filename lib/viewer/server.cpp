@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -135,15 +136,20 @@ Json vec3_json(const torch::Tensor& v) {
 
 // (H, W, 3) float RGB in [0, 1], or (H, W) values in [0, 1] shown as grey, as PNG bytes (or
 // JPEG at quality 90 with `jpeg`: a few times faster to make, for views shown while moving).
+// Each value becomes the nearest of 256 levels as transhuman-render's images do (x 255, rounded
+// half to even, clamped; NaN black), in one pass that also turns RGB into OpenCV's BGR.
 std::string png(const torch::Tensor& image, bool jpeg = false) {
-  auto u8 = (image.clamp(0, 1) * 255).round().to(torch::kUInt8).contiguous();
-  const int h = int(u8.size(0)), w = int(u8.size(1)), c = u8.dim() == 3 ? 3 : 1;
-  cv::Mat m(h, w, c == 3 ? CV_8UC3 : CV_8UC1, u8.data_ptr<uint8_t>());
-  cv::Mat out;
-  if (c == 3)
-    cv::cvtColor(m, out, cv::COLOR_RGB2BGR);
-  else
-    out = m;
+  const auto values = image.to(torch::kFloat32).contiguous();
+  const int h = int(values.size(0)), w = int(values.size(1)), c = values.dim() == 3 ? 3 : 1;
+  cv::Mat out(h, w, c == 3 ? CV_8UC3 : CV_8UC1);
+  const float* in = values.data_ptr<float>();
+  uint8_t* o = out.ptr<uint8_t>();
+  const int64_t pixels = int64_t(h) * w;
+  for (int64_t p = 0; p < pixels; ++p)
+    for (int k = 0; k < c; ++k) {
+      const float x = in[p * c + (c - 1 - k)] * 255.f;
+      o[p * c + k] = x > 0 ? uint8_t(std::nearbyint(std::min(x, 255.f))) : 0;
+    }
   std::vector<uchar> bytes;
   if (jpeg)
     cv::imencode(".jpg", out, bytes, {cv::IMWRITE_JPEG_QUALITY, 90});
@@ -267,9 +273,17 @@ class Viewer {
     return png(sample.target_image * sample.box_mask.unsqueeze(-1).to(torch::kFloat32));
   }
 
+  // A view's image, and how long its stages took as an HTTP Server-Timing header's value
+  // (milliseconds: `march` or `render`, then `encode`), so a page or benchmark can tell the
+  // server's part of a round trip from the rest.
+  struct View {
+    std::string bytes;
+    std::string timing;
+  };
+
   // A PNG, or HttpError: 409 when a newer request of the same page took over, 503 when the
   // viewer stops, the render runs past its time bound or the renderer stays busy.
-  std::string render(const httplib::Request& req, const std::function<bool()>& client_gone) {
+  View render(const httplib::Request& req, const std::function<bool()>& client_gone) {
     const auto [h, f] = person_frame(req);
     // camera=C: dataset camera C exactly (K, R, T and image size), as transhuman-render --camera.
     const int snap = req.has_param("camera")
@@ -324,9 +338,10 @@ class Viewer {
       bake::MarchOptions march;
       march.samples = samples > 0 ? samples : session_.config().render.samples;
       march.termination = session_.config().render.termination_transmittance;
+      const auto marched = Clock::now();
       const auto img =
           bake::render_baked(*frame, camera.K, camera.R, camera.T, width, height, march);
-      return png(display(img.rgb, img.depth, img.acc, mode), format == "jpeg");
+      return encoded("march", marched, display(img.rgb, img.depth, img.acc, mode), format);
     }
     const auto lock = render_lock(interrupted);
     const auto started = Clock::now();
@@ -358,7 +373,21 @@ class Viewer {
       if (client_gone()) spdlog::info("viewer: a render was cancelled, its client went away");
       throw *stopped;
     }
-    return png(display(images->rgb, images->depth, images->acc, mode), format == "jpeg");
+    return encoded("render", started, display(images->rgb, images->depth, images->acc, mode),
+                   format);
+  }
+
+  // The view's bytes in `format`, with the time since `started` as the stage `stage`.
+  static View encoded(const char* stage, Clock::time_point started, const torch::Tensor& image,
+                      const std::string& format) {
+    const auto ms = [](Clock::duration d) {
+      return std::chrono::duration<double, std::milli>(d).count();
+    };
+    const auto encoding = Clock::now();
+    View view{png(image, format == "jpeg"), ""};
+    view.timing = fmt::format("{};dur={:.1f}, encode;dur={:.1f}", stage, ms(encoding - started),
+                              ms(Clock::now() - encoding));
+    return view;
   }
 
   // The bake of a frame: started in the background when first asked for (with --bake), then its
@@ -615,10 +644,11 @@ Server::Server(const Session& session, const Options& options)
                res.set_content(viewer.bake_json(req), "application/json");
              }));
   server.Get("/api/render", guarded([&viewer](const httplib::Request& req, httplib::Response& res) {
-               const auto image = viewer.render(req, Listener::client_gone);
+               const auto view = viewer.render(req, Listener::client_gone);
                res.set_header("Cache-Control", "no-store");
+               res.set_header("Server-Timing", view.timing);
                const bool jpeg = req.has_param("format") && req.get_param_value("format") == "jpeg";
-               res.set_content(image, jpeg ? "image/jpeg" : "image/png");
+               res.set_content(view.bytes, jpeg ? "image/jpeg" : "image/png");
              }));
 
   // An empty --host means every interface, as it does for most servers (getaddrinfo would

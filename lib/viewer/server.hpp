@@ -13,7 +13,8 @@
 //   GET /api/bake?human=H&frame=F   starts the frame's bake in the background (METHOD 7.1) and
 //                         says how far it is: {"state": baking|ready|failed, "progress", ...}
 //   GET /api/render?...&baked=1   the view from the frame's bake (404 until it is ready): no
-//                         network, milliseconds; format=jpeg for a JPEG instead of a PNG
+//                         network, milliseconds; format=jpeg for a JPEG instead of a PNG.
+//                         Every view answers with Server-Timing: march or render, then encode (ms)
 //   GET /api/reference?human=H&frame=F&index=I                    reference view I (PNG)
 //   GET /api/evaluate?human=H&frame=F&camera=C   dataset camera C scored as transhuman-eval
 //                         scores it: {"psnr", "ssim"} (JSON)

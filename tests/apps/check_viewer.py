@@ -384,6 +384,22 @@ def main():
               f'the bake is ready ({bake})')
         status, img = get(base, '/api/render', {**look, 'baked': 1, 'format': 'jpeg', 'seq': 201})
         check(status == 200 and img[:3] == b'\xff\xd8\xff', f'a baked view as JPEG ({status})')
+        # Each view says how long the server's stages took (Server-Timing), the march or the
+        # render, then the encoding, and answers on a kept-alive connection.
+        conn = http.client.HTTPConnection('127.0.0.1', port, timeout=120)
+        try:
+            timings = []
+            for seq, extra in ((204, {'baked': 1, 'format': 'jpeg'}), (205, {})):
+                conn.request('GET', '/api/render?' + urllib.parse.urlencode({**look, **extra, 'seq': seq}))
+                r = conn.getresponse()
+                r.read()
+                timings.append((r.status, r.getheader('Server-Timing') or ''))
+        finally:
+            conn.close()
+        stage = re.compile(r'^(march|render);dur=[0-9.]+, encode;dur=[0-9.]+$')
+        check([s for s, _ in timings] == [200, 200] and timings[0][1].startswith('march;')
+              and timings[1][1].startswith('render;') and all(stage.match(t) for _, t in timings),
+              f'baked and exact views name their stages\' times on one connection ({timings})')
         status, img = get(base, '/api/render', {**look, 'baked': 1, 'mode': 'depth', 'seq': 202})
         check(status == 200 and png_size(img) == (40, 30), f'a baked depth view as a 40x30 PNG ({status})')
         status, body = get(base, '/api/render', {'human': 0, 'frame': frame, 'camera': 3, 'baked': 1, 'seq': 203})
