@@ -119,7 +119,9 @@ def main():
         f'- the frame\'s bake (/api/bake until ready): {bake_seconds:.2f} s, {bake["state"]}'
         + (f', {bake["bricks"]} bricks, {bake["mib"]:.1f} MiB, {100 * bake["voxel"]:.1f} cm grid' if bake['state'] == 'ready' else ''),
         f'- baked image ({w0}x{h0}, JPEG) after a move: '
-        + (f'median {1e3 * statistics.median(baked):.1f} ms, worst {1e3 * max(baked):.1f} ms ({len(baked)} drags)' if baked else 'none'),
+        + (f'median {1e3 * statistics.median(baked):.1f} ms, worst {1e3 * max(baked):.1f} ms ({len(baked)} drags); '
+           f'the server\'s part (Server-Timing, medians): march {statistics.median(float(s["march"]) for s in stages):.1f} ms, '
+           f'encode {statistics.median(float(s["encode"]) for s in stages):.1f} ms' if baked else 'none'),
         f'- in headless Chromium while dragging: {fps or "not measured"}',
         f'- server memory: resident {mem.get("VmRSS")}, peak {mem.get("VmHWM")}',
         '',
