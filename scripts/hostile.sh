@@ -212,7 +212,7 @@ check "evaluated with model.dparf.nk=2 and eval.model_mismatch=warn" 0 \
 
 # ---- 4. resources are checked before work starts --------------------------------------------------
 check "--threads 100000" 2 "--threads: must be in [0, 4096], not 100000" "$apps/transhuman-render" --threads 100000
-check "threads: 100000 in the config" 2 "config key 'threads' = 100000: must be in [0, 4096] (0: one per core)" \
+check "threads: 100000 in the config" 2 "config key 'threads' = 100000: must be in [0, 4096] (CPU threads for LibTorch; 0: one per core)" \
   "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run threads=100000
 check "mesh --voxel 1e-4 (a 10^11-point grid)" 2 "estimated peak memory" \
   "$apps/transhuman-mesh" "${tiny[@]}" $(on "$data") --checkpoint "$ckpt" --out "$work/m1" --voxel 1e-4 max_memory_gb=4
@@ -321,13 +321,14 @@ rows+=("| ... metrics.jsonl holds each training step once after the resume | - |
 # ---- 4b. every config value in its range, refused by name before anything is written -------------
 for kv in "threads=-5|'threads' = -5: must be in [0, 4096]" "eval.limit=-3|'eval.limit' = -3: must be >= 0" \
   "model.transhe.depth=-1|'model.transhe.depth' = -1: must be in [1, 64]" \
-  "model.transhe.mlp_dim=-5|'model.transhe.mlp_dim' = -5: must be positive" \
-  "train.beta1=2|'train.beta1' = 2: must be in [0, 1)" "model.transhe.dim=0|'model.transhe.dim' = 0: must be positive" \
+  "model.transhe.mlp_dim=-5|'model.transhe.mlp_dim' = -5: must be >= 1" \
+  "train.beta1=2|'train.beta1' = 2: must be in [0, 1)" "model.transhe.dim=0|'model.transhe.dim' = 0: must be >= 1" \
   "train.min_lr=1|'train.min_lr' = 1: must be in [0, train.lr]" \
-  "data.box_padding=.nan|'data.box_padding' = nan: must be a finite number >= 0" \
-  "data.box_padding=-1|'data.box_padding' = -1: must be a finite number >= 0" \
-  "train.dist_timeout_s=.inf|'train.dist_timeout_s' = inf: must be in (0, 86400] seconds" \
+  "data.box_padding=.nan|'data.box_padding' = nan: must be finite" \
+  "data.box_padding=-1|'data.box_padding' = -1: must be >= 0" \
+  "train.dist_timeout_s=.inf|'train.dist_timeout_s' = inf: must be finite" \
   "data.ratio=0.001|'data.ratio' = 0.001: must be in [0.01, 1]" \
+  "train.dist_timeout_s=0|'train.dist_timeout_s' = 0: must be in (0, 86400]" \
   "render.samples=100000|'render.samples' = 100000: must be in [2, 4096]"; do
   check "config ${kv%%|*}" 2 "config key ${kv#*|}" "$apps/transhuman-train" "${tiny[@]}" $(on "$data") --dry-run \
     --out "$work/range_${kv%%=*}" "${kv%%|*}"

@@ -32,6 +32,13 @@ void add_common_options(CLI::App& cli, CommonOptions& o) {
       ->check(in_range(0, 4096));
   cli.add_flag("--dry-run", o.dry_run, "build everything the config names, print a summary, exit");
   cli.add_flag("-v,--verbose", o.verbose, "debug logging");
+  cli.add_flag_callback(
+      "--config-keys",
+      [] {
+        std::cout << config::describe(config::keys<Config>());
+        throw CLI::Success();
+      },
+      "list every config key: default, accepted values, description; then exit");
   cli.add_option("overrides", o.overrides, "config overrides, e.g. train.lr=1e-4 model.dparf.nk=1");
 }
 
@@ -474,6 +481,8 @@ std::optional<int> parse_command_line(CLI::App& cli, int argc, char** argv) {
     return 0;
   } catch (const CLI::CallForAllHelp&) {
     std::cout << cli.help("", CLI::AppFormatMode::All);
+    return 0;
+  } catch (const CLI::Success&) {  // --config-keys (after the help requests, which derive from it)
     return 0;
   } catch (const CLI::ParseError& e) {
     std::string message = e.what();

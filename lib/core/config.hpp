@@ -63,15 +63,16 @@ TH_CHOICE_NAMES(Recompute, {"auto", Recompute::automatic}, {"always", Recompute:
                 {"never", Recompute::never})
 #undef TH_CHOICE_NAMES
 
-// ---- data (METHOD 1, 2.1, 5) --------------------------------------------------------------
+// ---- the sections: each field's type and default; its key, accepted values and description
+// are in the section's visit_fields below (config_io.hpp), written once --------------------
 struct PatchConfig {
-  int count = 6;           // patches per target image
-  int size = 20;           // side in pixels
-  double body_prob = 0.8;  // probability that a patch centre lies on the person
+  int count = 6;
+  int size = 20;
+  double body_prob = 0.8;
 };
 
 struct JitterConfig {
-  bool enabled = true;  // training only; same parameters for target and references
+  bool enabled = true;
   std::vector<double> brightness{0.2, 2.0};
   std::vector<double> contrast{0.3, 2.0};
   std::vector<double> saturation{0.2, 2.0};
@@ -79,43 +80,33 @@ struct JitterConfig {
 };
 
 struct DataConfig {
-  DatasetKind dataset = DatasetKind::synthetic;  // zju_mocap | h36m | synthetic | capture
-  std::string root = "data/synthetic";           // folder holding one folder per human
-  DataLayout layout = DataLayout::automatic;     // auto | zju_mocap | easymocap (data/sequence.hpp)
-  int person_id = -1;  // easymocap: the person's id in the SMPL files; -1: the only one
-  // Empty: every person under data.root, every frame; references as below, the other cameras
-  // targets.
+  DatasetKind dataset = DatasetKind::synthetic;
+  std::string root = "data/synthetic";
+  DataLayout layout = DataLayout::automatic;
+  int person_id = -1;
   std::string split_file = "data_splits/synthetic.yaml";
-  // Fixed reference cameras by name or index, replacing the setting's; empty: the split's, or
-  // without a split the num_reference_views cameras most evenly spread around the body.
   std::vector<std::string> reference_views;
-  int num_reference_views = 3;  // without a split file
+  int num_reference_views = 3;
   std::string train_setting = "training";
-  std::string test_setting = "identity";  // pose | identity | one_shot | cross_dataset | fitting
-  std::string smpl_model = "";            // SMPL .pkl/.npz; empty: <root>/smpl_model.npz
-  double ratio = 0.5;                     // image resize factor
-  VisibilitySource visibility = VisibilitySource::rasterize;  // rasterize | files
-  std::string visibility_root = "";  // for visibility: files (NHP's zju_rasterization)
-  MissingVisibility visibility_missing =
-      MissingVisibility::error;  // files: error | all_visible (warns)
-  double box_padding = 0.05;     // world AABB padding on z (metres)
-  // Calibration that cannot be right (intrinsics, rotations, the body out of a reference view or
-  // at an implausible distance; data/calibration.hpp): an error, or a warning.
-  CalibrationCheck calibration_check = CalibrationCheck::error;  // error | warn
-  // Target mask border band (METHOD 2.1 step 6): marked on the distorted mask before undistortion
-  // [parity], or on the undistorted one.
-  BorderBand border_band = BorderBand::distorted;  // distorted | undistorted
+  std::string test_setting = "identity";
+  std::string smpl_model = "";
+  double ratio = 0.5;
+  VisibilitySource visibility = VisibilitySource::rasterize;
+  std::string visibility_root = "";
+  MissingVisibility visibility_missing = MissingVisibility::error;
+  double box_padding = 0.05;
+  CalibrationCheck calibration_check = CalibrationCheck::error;
+  BorderBand border_band = BorderBand::distorted;
   PatchConfig patch;
   JitterConfig jitter;
-  int workers = 2;   // background loader threads
-  int prefetch = 4;  // samples queued ahead
+  int workers = 2;
+  int prefetch = 4;
 };
 
-// ---- model (METHOD 2.5, 3) -----------------------------------------------------------------
 struct EncoderConfig {
-  std::string pretrained = "";  // ResNet-18 weights file from scripts/export_pretrained.py
-  BatchNormStats batchnorm = BatchNormStats::batch;  // batch [parity] | running
-  bool fast_sampling = true;  // METHOD 3.1/9: sample low-res maps, no (V,384,H,W) tensor
+  std::string pretrained = "";
+  BatchNormStats batchnorm = BatchNormStats::batch;
+  bool fast_sampling = true;
 };
 
 // model.grouping.kmeans_file's value that imports a reference checkpoint with token groups computed
@@ -124,43 +115,41 @@ inline constexpr const char* kKMeansCompute = "compute";
 
 struct GroupingConfig {
   GroupingKind kind = GroupingKind::canonical_kmeans;
-  int num_tokens = 300;             // Nt
-  std::string kmeans_file = "";     // reference kmeans_dict_300.npy; "compute": see kKMeansCompute
-  std::string cache_dir = "cache";  // k-means labels cached here, keyed by model and Nt
+  int num_tokens = 300;
+  std::string kmeans_file = "";
+  std::string cache_dir = "cache";
   int64_t seed = 0;
-  MeanOver mean_over = MeanOver::all;  // all [parity] | visible
+  MeanOver mean_over = MeanOver::all;
 };
 
 struct TransHEConfig {
-  bool enabled = true;  // false: tokens go straight to DPaRF (w/o transformer)
-  TokenPosition position = TokenPosition::canonical;  // observation: PE of posed token centres
+  bool enabled = true;
+  TokenPosition position = TokenPosition::canonical;
   int dim = 192;
   int depth = 12;
   int heads = 3;
   int mlp_dim = 768;
   int pe_freqs = 32;
-  double pe_scale = 1.5;  // Pc = mean(v_template[c]) / pe_scale
-  // float32 sin(x * f + phase): "fused" rounds once, as the reference's torch.addcmul (FMA)
-  // [parity, METHOD 3.2]; "separate" rounds the product and the sum (numpy's evaluation).
+  double pe_scale = 1.5;
   PeRounding pe_rounding = PeRounding::fused;
 };
 
 struct DPaRFConfig {
-  int nk = 7;  // nearest fields
+  int nk = 7;
   Coordinate coordinate = Coordinate::relative;
-  double softmax_temperature = 0.5;  // w = softmax(-d / T)
+  double softmax_temperature = 0.5;
   int pe_freqs = 10;
-  PeRounding pe_rounding = PeRounding::fused;  // fused [parity] | separate, as transhe.pe_rounding
+  PeRounding pe_rounding = PeRounding::fused;
 };
 
 struct FDIConfig {
-  bool appearance = true;  // a: image features of the reference views
-  bool human = true;       // h: the human representation branch
-  bool raw_rgb = true;     // upsample_color channels in p_v
+  bool appearance = true;
+  bool human = true;
+  bool raw_rgb = true;
 };
 
 struct SPCConfig {
-  double voxel_size = 0.005 * 4;  // coarse grid for the SPC + trilinear baseline
+  double voxel_size = 0.005 * 4;
   int channels = 64;
 };
 
@@ -172,36 +161,20 @@ struct ModelConfig {
   DPaRFConfig dparf;
   FDIConfig fdi;
   SPCConfig spc;
-  // METHOD 9 identities (per-level readouts of p_v, fc_0 on the tokens, folded linear layers);
-  // false: the reference's direct computation (slower; for checking).
   bool exact_shortcuts = true;
-  // METHOD 9 readout windows (with exact_shortcuts, inference on CPU): the readouts at full
-  // resolution on a rectangle of each view around the body; false: per-level tables.
   bool readout_windows = true;
 };
 
-// ---- rendering (METHOD 4) ------------------------------------------------------------------
 struct RenderConfig {
-  int samples = 64;            // per ray (16: the paper's fast variant)
-  bool progressive = true;     // inference: distance culling, colour only where sigma > 0
-  double cull_distance = 0.1;  // metres from the nearest body vertex
-  int64_t chunk_points =
-      4096;  // per-point work in chunks of this many points (bench/results/model.md)
-  // Progressive rendering marches each ray front to back and stops once its transmittance is
-  // below this bound: the samples it skips change rgb and acc by at most the bound (METHOD 4 note
-  // in render/progressive.hpp). 0: every kept sample is evaluated (the exact render).
+  int samples = 64;
+  bool progressive = true;
+  double cull_distance = 0.1;
+  int64_t chunk_points = 4096;
   double termination_transmittance = 1e-4;
-  // Training: chunk of the per-point network, recomputed in the backward pass (bounded memory).
   int64_t train_chunk_points = 4096;
-  // Training: "always" evaluates the per-point network without a graph and recomputes each chunk
-  // in the backward pass (memory of one chunk); "never" keeps every chunk's graph from the
-  // forward pass (one forward less; memory grows with the points); "auto" keeps them up to
-  // model::kKeepGraphPoints points per field call (the demo's batch) and recomputes beyond.
-  // The same arithmetic in the same order either way: the same weights, bit for bit.
   Recompute train_recompute = Recompute::automatic;
 };
 
-// ---- training (METHOD 5) -------------------------------------------------------------------
 struct TrainConfig {
   int epochs = 3000;
   int iters_per_epoch = 500;
@@ -211,51 +184,36 @@ struct TrainConfig {
   double beta1 = 0.9;
   double beta2 = 0.999;
   double eps = 1e-8;
-  double grad_clip = 40.0;  // element-wise
+  double grad_clip = 40.0;
   double lpips_weight = 0.1;
-  std::string lpips_weights = "";  // file from scripts/export_lpips.py; empty: term off
-  bool skip_far_points = false;    // cull points > cull_distance from the body in training too
-  int save_every_epochs = 10;      // 0: only the final checkpoint (latest.pt is always written)
-  int val_every_epochs = 10;       // 0: validate only after the last epoch
+  std::string lpips_weights = "";
+  bool skip_far_points = false;
+  int save_every_epochs = 10;
+  int val_every_epochs = 10;
   int val_views = 2;
   int log_every_steps = 10;
-  double max_minutes = 0;  // stop (with a checkpoint) after this wall time; 0: no limit
-  // Data-parallel training (several ranks, lib/dist): c10d backend, how long a rank waits for
-  // the others before it gives up with an error, and the size of the gradient all-reduce buckets.
-  std::string dist_backend = "auto";  // auto (nccl on CUDA when built in, else gloo) | gloo | nccl
+  double max_minutes = 0;
+  std::string dist_backend = "auto";
   double dist_timeout_s = 300;
   double dist_bucket_mb = 25;
-  // With several ranks, the encoder's BatchNorm normalises over every rank's images together
-  // (statistics summed over the ranks, forward and backward) [parity: the reference trains
-  // with SyncBatchNorm]; false: each rank's own images.
   bool sync_batchnorm = true;
 };
 
-// ---- evaluation (METHOD 6) -----------------------------------------------------------------
 struct EvalConfig {
   std::string setting = "identity";
   std::string lpips_weights = "";
-  int limit = 0;  // 0: all images
+  int limit = 0;
   bool save_images = true;
-  // Target views of one frame share its prepared stages (encoder, TransHE, DPaRF tokens, painted
-  // vertices; they depend only on the frame's inputs, compared value by value). false: every
-  // view prepares its frame again.
   bool reuse_frames = true;
-  // A checkpoint trained with other model.* values (its stored config, or its run's config.yaml):
-  // "error" names the keys and stops; "warn" names them and goes on (a deliberate ablation).
   MismatchPolicy model_mismatch = MismatchPolicy::error;
 };
 
 struct Config {
   int64_t seed = 42;
-  std::string device = "auto";  // auto | cpu | cuda
-  // Floating-point type of the network's matrix products (model/precision.hpp): fp32 (the
-  // paper's numbers), bf16, or auto (bf16 where the processor has native bf16 dot products).
+  std::string device = "auto";
   std::string precision = "fp32";
-  // fp32 products on CPU: auto (oneDNN when LibTorch has it) | onednn | blas.
   std::string fp32_products = "auto";
-  int threads = 0;  // 0: one per core
-  // Refuse work whose estimated peak memory (render, mesh) exceeds this; 0: 3/4 of physical memory.
+  int threads = 0;
   double max_memory_gb = 0;
   DataConfig data;
   ModelConfig model;
@@ -264,167 +222,225 @@ struct Config {
   EvalConfig eval;
 };
 
-// ---- field lists -------------------------------------------------------------------------
+// ---- the keys ------------------------------------------------------------------------------
+// ---- data (METHOD 1, 2.1, 5)
 template <class V>
 void visit_fields(V& v, PatchConfig& c) {
-  v("count", c.count);
-  v("size", c.size);
-  v("body_prob", c.body_prob);
+  v("count", c.count, config::in(1, 1024), "patches per target image");
+  v("size", c.size, config::in(1, 4096), "a patch's side in pixels");
+  v("body_prob", c.body_prob, config::in(0, 1),
+    "probability that a patch's centre lies on the person");
 }
 template <class V>
 void visit_fields(V& v, JitterConfig& c) {
-  v("enabled", c.enabled);
-  v("brightness", c.brightness);
-  v("contrast", c.contrast);
-  v("saturation", c.saturation);
-  v("hue", c.hue);
+  v("enabled", c.enabled, "colour jitter (training only; the same for target and references)");
+  v("brightness", c.brightness, "factor range [low, high]");
+  v("contrast", c.contrast, "factor range [low, high]");
+  v("saturation", c.saturation, "factor range [low, high]");
+  v("hue", c.hue, "shift range [low, high] in turns");
 }
 template <class V>
 void visit_fields(V& v, DataConfig& c) {
-  v.choice("dataset", c.dataset);
-  v("root", c.root);
-  v.choice("layout", c.layout);
-  v("person_id", c.person_id);
-  v("split_file", c.split_file);
-  v("reference_views", c.reference_views);
-  v("num_reference_views", c.num_reference_views);
-  v("train_setting", c.train_setting);
-  v("test_setting", c.test_setting);
-  v("smpl_model", c.smpl_model);
-  v("ratio", c.ratio);
-  v.choice("visibility", c.visibility);
-  v("visibility_root", c.visibility_root);
-  v.choice("visibility_missing", c.visibility_missing);
-  v("box_padding", c.box_padding);
-  v.choice("calibration_check", c.calibration_check);
-  v.choice("border_band", c.border_band);
-  v("patch", c.patch);
-  v("jitter", c.jitter);
-  v("workers", c.workers);
-  v("prefetch", c.prefetch);
+  v.choice("dataset", c.dataset, "which data: capture is your own (docs/YOUR_CAPTURE.md)");
+  v("root", c.root, "the folder holding one folder per person");
+  v.choice("layout", c.layout,
+           "a person's folder: ZJU-MoCap's (annots.npy) or EasyMocap's (intri.yml, extri.yml); "
+           "auto tells them apart");
+  v("person_id", c.person_id, config::at_least(-1),
+    "easymocap: the person's id in the SMPL files; -1: the only one");
+  v("split_file", c.split_file,
+    "people, frames and cameras per setting; empty: every person and frame under root");
+  v("reference_views", c.reference_views,
+    "fixed reference cameras by name or index, replacing the split's; empty: the split's, or "
+    "without a split the num_reference_views cameras most evenly spread around the body");
+  v("num_reference_views", c.num_reference_views, config::in(1, 64),
+    "reference cameras without a split file");
+  v("train_setting", c.train_setting, "the split's setting trained on");
+  v("test_setting", c.test_setting,
+    "the split's setting evaluated: pose | identity | one_shot | cross_dataset | fitting");
+  v("smpl_model", c.smpl_model, "SMPL .pkl/.npz; empty: <root>/smpl_model.npz");
+  v("ratio", c.ratio, config::in(0.01, 1), "image resize factor (1024 px -> 512 px: 0.5)");
+  v.choice("visibility", c.visibility,
+           "vertex visibility per reference view: rasterized here, or read from NHP's files");
+  v("visibility_root", c.visibility_root, "visibility: files: the folder of the files");
+  v.choice("visibility_missing", c.visibility_missing,
+           "visibility: files: a missing file is an error, or all vertices visible (warns)");
+  v("box_padding", c.box_padding, config::at_least(0),
+    "the world box's padding on z, in metres (METHOD 2.2)");
+  v.choice("calibration_check", c.calibration_check,
+           "calibration that cannot be right (intrinsics, rotations, the body out of a reference "
+           "view or at an implausible distance): an error, or a warning");
+  v.choice("border_band", c.border_band,
+           "the target mask's border band (METHOD 2.1): marked before undistortion [parity], or "
+           "after");
+  v("patch", c.patch, "training rays (METHOD 5)");
+  v("jitter", c.jitter, "colour jitter (METHOD 2.1)");
+  v("workers", c.workers, config::in(0, 256), "background loader threads");
+  v("prefetch", c.prefetch, config::in(1, 1024), "samples queued ahead");
 }
+// ---- model (METHOD 2.5, 3)
 template <class V>
 void visit_fields(V& v, EncoderConfig& c) {
-  v("pretrained", c.pretrained);
-  v.choice("batchnorm", c.batchnorm);
-  v("fast_sampling", c.fast_sampling);
+  v("pretrained", c.pretrained, "ResNet-18 weights (scripts/export_pretrained.py); empty: random");
+  v.choice("batchnorm", c.batchnorm, "BatchNorm statistics: the batch's [parity] or running");
+  v("fast_sampling", c.fast_sampling,
+    "sample the low-resolution maps directly, no (V, 384, H, W) tensor (METHOD 3.1, 9)");
 }
 template <class V>
 void visit_fields(V& v, GroupingConfig& c) {
-  v.choice("kind", c.kind);
-  v("num_tokens", c.num_tokens);
-  v("kmeans_file", c.kmeans_file);
-  v("cache_dir", c.cache_dir);
-  v("seed", c.seed);
-  v.choice("mean_over", c.mean_over);
+  v.choice("kind", c.kind, "how SMPL's vertices are grouped into tokens (METHOD 3.2)");
+  v("num_tokens", c.num_tokens, config::in(1, 6890),
+    "Nt, the token count (SMPL has 6890 vertices)");
+  v("kmeans_file", c.kmeans_file,
+    "the reference's kmeans_dict_300.npy (needed to import its .pth), or compute; empty: the "
+    "labels stored with the model");
+  v("cache_dir", c.cache_dir, "k-means labels cached here, keyed by body model and Nt");
+  v("seed", c.seed, "k-means seed");
+  v.choice("mean_over", c.mean_over,
+           "a token's feature: mean over all its vertices [parity] or the visible ones");
 }
 template <class V>
 void visit_fields(V& v, TransHEConfig& c) {
-  v("enabled", c.enabled);
-  v.choice("position", c.position);
-  v("dim", c.dim);
-  v("depth", c.depth);
-  v("heads", c.heads);
-  v("mlp_dim", c.mlp_dim);
-  v("pe_freqs", c.pe_freqs);
-  v("pe_scale", c.pe_scale);
-  v.choice("pe_rounding", c.pe_rounding);
+  v("enabled", c.enabled, "the transformer; false: tokens go straight to DPaRF");
+  v.choice("position", c.position,
+           "the tokens' positional encoding: canonical centres, or posed (observation)");
+  v("dim", c.dim, config::at_least(1), "token width");
+  v("depth", c.depth, config::in(1, 64), "transformer blocks (enabled: false turns it off)");
+  v("heads", c.heads, config::at_least(1), "attention heads (must divide dim)");
+  v("mlp_dim", c.mlp_dim, config::at_least(1), "the blocks' MLP width");
+  v("pe_freqs", c.pe_freqs, config::at_least(1), "positional-encoding frequencies (6 x = dim)");
+  v("pe_scale", c.pe_scale, config::above(0), "Pc = mean(v_template[c]) / pe_scale");
+  v.choice("pe_rounding", c.pe_rounding,
+           "float32 sin(x f + phase): fused rounds once, as torch.addcmul [parity, METHOD 3.2]; "
+           "separate rounds the product and the sum (numpy)");
 }
 template <class V>
 void visit_fields(V& v, DPaRFConfig& c) {
-  v("nk", c.nk);
-  v.choice("coordinate", c.coordinate);
-  v("softmax_temperature", c.softmax_temperature);
-  v("pe_freqs", c.pe_freqs);
-  v.choice("pe_rounding", c.pe_rounding);
+  v("nk", c.nk, "nearest fields per point (1..grouping.num_tokens)");
+  v.choice("coordinate", c.coordinate, "a point's coordinate in each field (METHOD 3.3)");
+  v("softmax_temperature", c.softmax_temperature, config::above(0), "w = softmax(-d / T)");
+  v("pe_freqs", c.pe_freqs, config::at_least(0), "positional-encoding frequencies of coordinates");
+  v.choice("pe_rounding", c.pe_rounding, "fused [parity] | separate, as transhe.pe_rounding");
 }
 template <class V>
 void visit_fields(V& v, FDIConfig& c) {
-  v("appearance", c.appearance);
-  v("human", c.human);
-  v("raw_rgb", c.raw_rgb);
+  v("appearance", c.appearance, "a: the reference views' image features");
+  v("human", c.human, "h: the human representation branch");
+  v("raw_rgb", c.raw_rgb, "the reference pixels' colours in p_v");
 }
 template <class V>
 void visit_fields(V& v, SPCConfig& c) {
-  v("voxel_size", c.voxel_size);
-  v("channels", c.channels);
+  v("voxel_size", c.voxel_size, "the grid's voxel in metres (representation: spc_trilinear)");
+  v("channels", c.channels, config::at_least(1), "the grid's feature channels");
 }
 template <class V>
 void visit_fields(V& v, ModelConfig& c) {
-  v.choice("representation", c.representation);
-  v("encoder", c.encoder);
-  v("grouping", c.grouping);
-  v("transhe", c.transhe);
-  v("dparf", c.dparf);
-  v("fdi", c.fdi);
-  v("spc", c.spc);
-  v("exact_shortcuts", c.exact_shortcuts);
-  v("readout_windows", c.readout_windows);
+  v.choice("representation", c.representation,
+           "transhuman, or spc_trilinear (the NHP-style baseline)");
+  v("encoder", c.encoder, "image encoder (METHOD 2.5)");
+  v("grouping", c.grouping, "token groups (METHOD 3.2)");
+  v("transhe", c.transhe, "TransHE (METHOD 3.2)");
+  v("dparf", c.dparf, "DPaRF (METHOD 3.3)");
+  v("fdi", c.fdi, "FDI (METHOD 3.4)");
+  v("spc", c.spc, "the SPC + trilinear baseline");
+  v("exact_shortcuts", c.exact_shortcuts,
+    "METHOD 9 identities (per-level readouts, fc_0 on the tokens, folded layers); false: the "
+    "direct computation (slower; for checking)");
+  v("readout_windows", c.readout_windows,
+    "METHOD 9 readouts at full resolution on a rectangle around the body (inference, CPU); "
+    "false: per-level tables");
 }
+// ---- rendering (METHOD 4)
 template <class V>
 void visit_fields(V& v, RenderConfig& c) {
-  v("samples", c.samples);
-  v("progressive", c.progressive);
-  v("cull_distance", c.cull_distance);
-  v("chunk_points", c.chunk_points);
-  v("termination_transmittance", c.termination_transmittance);
-  v("train_chunk_points", c.train_chunk_points);
-  v.choice("train_recompute", c.train_recompute);
+  v("samples", c.samples, config::in(2, 4096), "samples per ray (16: the paper's fast variant)");
+  v("progressive", c.progressive,
+    "inference: distance culling, and colour only where the density is positive");
+  v("cull_distance", c.cull_distance, config::above(0),
+    "metres from the nearest body vertex beyond which a sample is empty");
+  v("chunk_points", c.chunk_points, config::in(1024, 1 << 24),
+    "per-point work in chunks of this many points (bench/results/model.md)");
+  v("termination_transmittance", c.termination_transmittance, config::in_below(0, 1),
+    "stop a ray once its transmittance is below this (changes rgb and acc by at most it); 0: "
+    "every kept sample");
+  v("train_chunk_points", c.train_chunk_points, config::in(256, 1 << 24),
+    "training: the per-point network's chunk, recomputed in the backward pass");
+  v.choice("train_recompute", c.train_recompute,
+           "training: always recompute each chunk in the backward pass (memory of one chunk), "
+           "never (keep every chunk's graph), or auto (keep up to model::kKeepGraphPoints points "
+           "per field call); the same weights bit for bit");
 }
+// ---- training (METHOD 5)
 template <class V>
 void visit_fields(V& v, TrainConfig& c) {
-  v("epochs", c.epochs);
-  v("iters_per_epoch", c.iters_per_epoch);
-  v("lr", c.lr);
-  v("min_lr", c.min_lr);
-  v("warmup_epochs", c.warmup_epochs);
-  v("beta1", c.beta1);
-  v("beta2", c.beta2);
-  v("eps", c.eps);
-  v("grad_clip", c.grad_clip);
-  v("lpips_weight", c.lpips_weight);
-  v("lpips_weights", c.lpips_weights);
-  v("skip_far_points", c.skip_far_points);
-  v("save_every_epochs", c.save_every_epochs);
-  v("val_every_epochs", c.val_every_epochs);
-  v("val_views", c.val_views);
-  v("log_every_steps", c.log_every_steps);
-  v("max_minutes", c.max_minutes);
-  v.choice("dist_backend", c.dist_backend, {"auto", "gloo", "nccl"});
-  v("dist_timeout_s", c.dist_timeout_s);
-  v("dist_bucket_mb", c.dist_bucket_mb);
-  v("sync_batchnorm", c.sync_batchnorm);
+  v("epochs", c.epochs, config::in(1, 10000000), "epochs");
+  v("iters_per_epoch", c.iters_per_epoch, config::in(1, 10000000), "steps per epoch");
+  v("lr", c.lr, config::above(0), "peak learning rate");
+  v("min_lr", c.min_lr, config::at_least(0), "the cosine schedule's floor (at most lr)");
+  v("warmup_epochs", c.warmup_epochs, config::at_least(0), "linear warm-up (fewer than epochs)");
+  v("beta1", c.beta1, config::in_below(0, 1), "Adam's beta1");
+  v("beta2", c.beta2, config::in_below(0, 1), "Adam's beta2");
+  v("eps", c.eps, config::above(0), "Adam's epsilon");
+  v("grad_clip", c.grad_clip, config::above(0), "element-wise gradient clip");
+  v("lpips_weight", c.lpips_weight, config::at_least(0), "the perceptual term's weight");
+  v("lpips_weights", c.lpips_weights,
+    "LPIPS weights (scripts/export_lpips.py); empty: the perceptual term is off");
+  v("skip_far_points", c.skip_far_points,
+    "cull samples farther than render.cull_distance from the body in training too");
+  v("save_every_epochs", c.save_every_epochs, config::at_least(0),
+    "checkpoint interval; 0: only at the end (latest.pt is always written)");
+  v("val_every_epochs", c.val_every_epochs, config::at_least(0),
+    "validation interval; 0: only after the last epoch");
+  v("val_views", c.val_views, config::in(0, 1024), "views rendered per validation");
+  v("log_every_steps", c.log_every_steps, config::at_least(1), "metrics line interval");
+  v("max_minutes", c.max_minutes, config::at_least(0),
+    "stop with a checkpoint after this wall time; 0: no limit");
+  v.choice("dist_backend", c.dist_backend, {"auto", "gloo", "nccl"},
+           "several ranks: the c10d backend (auto: nccl on CUDA when built in, else gloo)");
+  v("dist_timeout_s", c.dist_timeout_s, config::Range{0, 86400, true},
+    "seconds a rank waits for the others before it stops with an error");
+  v("dist_bucket_mb", c.dist_bucket_mb, config::Range{0, 4096, true},
+    "gradient all-reduce bucket size in MiB");
+  v("sync_batchnorm", c.sync_batchnorm,
+    "several ranks: the encoder's BatchNorm over every rank's images [parity]; false: each "
+    "rank's own");
 }
+// ---- evaluation (METHOD 6)
 template <class V>
 void visit_fields(V& v, EvalConfig& c) {
-  v("setting", c.setting);
-  v("lpips_weights", c.lpips_weights);
-  v("limit", c.limit);
-  v("save_images", c.save_images);
-  v("reuse_frames", c.reuse_frames);
-  v.choice("model_mismatch", c.model_mismatch);
+  v("setting", c.setting, "the split's setting scored");
+  v("lpips_weights", c.lpips_weights, "LPIPS weights; empty: LPIPS is not scored");
+  v("limit", c.limit, config::at_least(0), "images scored; 0: all");
+  v("save_images", c.save_images, "write each rendered view beside its scores");
+  v("reuse_frames", c.reuse_frames,
+    "target views of one frame share its prepared stages (encoder, TransHE, DPaRF tokens); "
+    "false: each view prepares its frame again");
+  v.choice("model_mismatch", c.model_mismatch,
+           "a checkpoint trained with other model.* values: error names the keys and stops, "
+           "warn names them and goes on");
 }
 template <class V>
 void visit_fields(V& v, Config& c) {
-  v("seed", c.seed);
-  v.choice("device", c.device, {"auto", "cpu", "cuda"});
-  v.choice("precision", c.precision, {"fp32", "bf16", "auto"});
-  v.choice("fp32_products", c.fp32_products, {"auto", "onednn", "blas"});
-  v("threads", c.threads);
-  v("max_memory_gb", c.max_memory_gb);
-  v("data", c.data);
-  v("model", c.model);
-  v("render", c.render);
-  v("train", c.train);
-  v("eval", c.eval);
+  v("seed", c.seed, "random seed");
+  v.choice("device", c.device, {"auto", "cpu", "cuda"}, "where the network runs");
+  v.choice("precision", c.precision, {"fp32", "bf16", "auto"},
+           "the network's matrix products: fp32 (the paper's numbers), bf16, or auto (bf16 "
+           "where the processor has native bf16 dot products; model/precision.hpp)");
+  v.choice("fp32_products", c.fp32_products, {"auto", "onednn", "blas"},
+           "fp32 products on CPU: auto (oneDNN when LibTorch has it), onednn or blas");
+  v("threads", c.threads, config::in(0, 4096), "CPU threads for LibTorch; 0: one per core");
+  v("max_memory_gb", c.max_memory_gb, config::at_least(0),
+    "refuse work (render, mesh) estimated to need more; 0: 3/4 of physical memory");
+  v("data", c.data, "data (METHOD 1, 2.1)");
+  v("model", c.model, "the network (METHOD 2.5, 3)");
+  v("render", c.render, "rendering (METHOD 4)");
+  v("train", c.train, "training (METHOD 5)");
+  v("eval", c.eval, "evaluation (METHOD 6)");
 }
 
-// Value checks across fields (ranges, incompatible ablation switches); throw th::Error.
+// Checks across fields (incompatible switches, one value bounded by another); throw th::Error.
 void validate_section(const DataConfig& c, const std::string& path);
 void validate_section(const ModelConfig& c, const std::string& path);
-void validate_section(const RenderConfig& c, const std::string& path);
 void validate_section(const TrainConfig& c, const std::string& path);
-void validate_section(const EvalConfig& c, const std::string& path);
-void validate_section(const Config& c, const std::string& path);
 
 }  // namespace th

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <charconv>
+#include <cmath>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -202,6 +203,57 @@ void Reader::check_unknown() const {
            detail::join_path(path_, best), "'?)");
     fail("unknown config key '", detail::join_path(path_, key), "' (known here: ", known_list, ")");
   }
+}
+
+namespace {
+
+// A bound as written in a message: integers without a decimal point, others as %g would.
+std::string bound(double x) {
+  std::ostringstream out;
+  out << x;
+  return out.str();
+}
+
+}  // namespace
+
+std::string Range::text() const {
+  const bool from = low != -std::numeric_limits<double>::infinity();
+  const bool to = high != std::numeric_limits<double>::infinity();
+  if (from && to)
+    return "in " + std::string(low_open ? "(" : "[") + bound(low) + ", " + bound(high) +
+           (high_open ? ")" : "]");
+  if (from) return (low_open ? "> " : ">= ") + bound(low);
+  if (to) return (high_open ? "< " : "<= ") + bound(high);
+  return "";
+}
+
+void Reader::check_range(const std::string& path, double value, const Range& range,
+                         const char* doc) {
+  const std::string what = doc && *doc ? std::string(" (") + doc + ")" : "";
+  if (!std::isfinite(value)) fail("config key '", path, "' = ", value, ": must be finite", what);
+  if (!range.holds(value))
+    fail("config key '", path, "' = ", bound(value), ": must be ", range.text(), what);
+}
+
+void Lister::add(const std::string& path, const std::string& type, const YAML::Node& value,
+                 const Range& range, const char* doc) {
+  YAML::Emitter out;
+  out << YAML::Flow << value;
+  out_.push_back({path, type, out.c_str(), range.text(), doc ? doc : "", range});
+}
+
+std::string describe(const std::vector<KeyInfo>& keys) {
+  size_t width = 0;
+  for (const auto& k : keys) width = std::max(width, k.key.size());
+  std::ostringstream out;
+  for (const auto& k : keys) {
+    out << k.key << std::string(width + 2 - k.key.size(), ' ') << k.value << "  (" << k.type;
+    if (!k.accepts.empty()) out << ", " << k.accepts;
+    out << ")";
+    if (!k.doc.empty()) out << "  " << k.doc;
+    out << "\n";
+  }
+  return out.str();
 }
 
 void write_yaml(const fs::path& file, const YAML::Node& tree) {

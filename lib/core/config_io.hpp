@@ -1,32 +1,36 @@
 #pragma once
 // Typed configuration from YAML (the mechanism; the option tree itself is in config.hpp).
 //
-// A config section is a plain struct with defaults and a `visit_fields` overload that lists its
-// fields once; the same list drives parsing (type checks, unknown keys), writing the resolved
-// config and documentation:
+// A config section is a plain struct whose fields hold the type and the default, and a
+// `visit_fields` overload that declares each field once more with everything else about it: its
+// key, the values it accepts and a one-line description. That one list drives reading (type and
+// range checks, unknown keys), writing the resolved config, and the listing of every key
+// (`--config-keys`):
 //
-//   struct PatchConfig { int count = 6; int size = 20; double body_prob = 0.8; };
+//   struct PatchConfig { int count = 6; double body_prob = 0.8; bool enabled = true; };
 //   template <class V> void visit_fields(V& v, PatchConfig& c) {
-//     v("count", c.count);
-//     v("size", c.size);
-//     v("body_prob", c.body_prob);
+//     v("count", c.count, config::in(1, 1024), "patches per training image");
+//     v("body_prob", c.body_prob, config::in(0, 1), "chance that a patch is centred on the body");
+//     v("enabled", c.enabled, "sample patches at all");            // no range: any value
 //   }
 //   template <class V> void visit_fields(V& v, DataConfig& c) {
-//     v("patch", c.patch);                                   // nested section
-//     v.choice("dataset", c.dataset, {"zju_mocap", "h36m", "synthetic"});
-//     v.choice("coordinate", c.coordinate);  // an enum with choice_names (below)
+//     v("patch", c.patch, "training rays");                        // nested section
+//     v.choice("dataset", c.dataset, "which reader");              // an enum with choice_names
+//     v.choice("device", c.device, {"auto", "cpu", "cuda"}, "where the network runs");
 //   }
 //
 // Field types: bool, int, int64_t, double, float, std::string, std::vector of those, and
-// nested structs with their own visit_fields. A struct may also define
-// `void validate_section(const T&, const std::string& path)` (found by ADL) that throws
-// th::Error for values that are the right type but make no sense together.
+// nested structs with their own visit_fields. Every number read must be finite. A struct may
+// also define `void validate_section(const T&, const std::string& path)` (found by ADL) that
+// throws th::Error for values that are each in range but make no sense together.
 
 #include <yaml-cpp/yaml.h>
 
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <initializer_list>
+#include <limits>
 #include <map>
 #include <optional>
 #include <set>
@@ -53,6 +57,32 @@ void apply_override(YAML::Node& root, const std::string& override_text);
 // integer the project reads from a config, a split file or the command line goes through it
 // (yaml-cpp and CLI11 on their own would read "010" as octal eight).
 std::optional<int64_t> decimal_integer(const std::string& text);
+
+// The values a numeric key accepts: an interval, closed or open at each end (its default: any
+// finite number).
+struct Range {
+  double low = -std::numeric_limits<double>::infinity();
+  double high = std::numeric_limits<double>::infinity();
+  bool low_open = false, high_open = false;
+
+  bool holds(double x) const {
+    return (low_open ? x > low : x >= low) && (high_open ? x < high : x <= high);
+  }
+  bool any() const {
+    return low == -std::numeric_limits<double>::infinity() &&
+           high == std::numeric_limits<double>::infinity();
+  }
+  // "in [2, 4096]", ">= 0", "> 0", "in [0, 1)"; empty for any().
+  std::string text() const;
+};
+inline Range in(double low, double high) { return {low, high, false, false}; }       // [low, high]
+inline Range in_below(double low, double high) { return {low, high, false, true}; }  // [low, high)
+inline Range at_least(double low) {
+  return {low, std::numeric_limits<double>::infinity(), false, false};
+}
+inline Range above(double low) {
+  return {low, std::numeric_limits<double>::infinity(), true, false};
+}
 
 // An enum choice lists its YAML names once, found by argument-dependent lookup:
 //   enum class Coordinate { relative, absolute, none };
@@ -135,15 +165,23 @@ class Reader {
   Reader(YAML::Node node, std::string path) : node_(std::move(node)), path_(std::move(path)) {}
 
   template <class T>
-  void operator()(const char* key, T& field) {
+  void operator()(const char* key, T& field, const char* doc = "") {
+    (*this)(key, field, Range{}, doc);
+  }
+  // Reads the key (the default stays when it is absent) and checks the value against `range`.
+  template <class T>
+  void operator()(const char* key, T& field, const Range& range, const char* doc) {
     seen_.insert(key);
     const YAML::Node child = node_[key];
     if (!child.IsDefined() || child.IsNull()) return;  // keep the default
-    read_value(child, detail::join_path(path_, key), field);
+    const std::string path = detail::join_path(path_, key);
+    read_value(child, path, field);
+    check_numbers(path, field, range, doc);
   }
 
-  void choice(const char* key, std::string& field, std::initializer_list<const char*> allowed) {
-    (*this)(key, field);
+  void choice(const char* key, std::string& field, std::initializer_list<const char*> allowed,
+              const char* doc = "") {
+    (*this)(key, field, doc);
     for (const char* a : allowed)
       if (field == a) return;
     std::string list;
@@ -154,7 +192,7 @@ class Reader {
 
   // A choice parsed once into an enum: the YAML names and their values.
   template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
-  void choice(const char* key, E& field) {
+  void choice(const char* key, E& field, const char* = "") {
     const auto& names = choice_names(E{});
     seen_.insert(key);
     const YAML::Node child = node_[key];
@@ -174,6 +212,20 @@ class Reader {
 
   // Throws naming the first key of the map that no field claimed (with the closest known key).
   void check_unknown() const;
+  // Throws naming the key when `value` is not finite or outside `range` (with the key's `doc`).
+  static void check_range(const std::string& path, double value, const Range& range,
+                          const char* doc);
+  // check_range on every number of `field` (a number or a list; nothing for other types).
+  template <class T>
+  static void check_numbers(const std::string& path, const T& field, const Range& range,
+                            const char* doc) {
+    if constexpr (std::is_arithmetic_v<T> && !std::is_same_v<T, bool>) {
+      check_range(path, double(field), range, doc);
+    } else if constexpr (detail::is_vector<T>::value) {
+      for (size_t i = 0; i < field.size(); ++i)
+        check_numbers(path + "[" + std::to_string(i) + "]", field[i], range, doc);
+    }
+  }
 
   template <class T>
   static void read_value(const YAML::Node& node, const std::string& path, T& field) {
@@ -209,14 +261,19 @@ class Writer {
   explicit Writer(YAML::Node node) : node_(std::move(node)) {}
 
   template <class T>
-  void operator()(const char* key, const T& field) {
+  void operator()(const char* key, const T& field, const char* = "") {
     node_[key] = to_node(field);
   }
-  void choice(const char* key, const std::string& field, std::initializer_list<const char*>) {
+  template <class T>
+  void operator()(const char* key, const T& field, const Range&, const char*) {
+    node_[key] = to_node(field);
+  }
+  void choice(const char* key, const std::string& field, std::initializer_list<const char*>,
+              const char* = "") {
     node_[key] = field;
   }
   template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
-  void choice(const char* key, const E& field) {
+  void choice(const char* key, const E& field, const char* = "") {
     node_[key] = name_of(field);
   }
 
@@ -239,6 +296,118 @@ class Writer {
  private:
   YAML::Node node_;
 };
+
+// Checks a section built in code as reading it would: every number finite and in its declared
+// range, and each section's validate_section.
+class Checker {
+ public:
+  explicit Checker(std::string path) : path_(std::move(path)) {}
+
+  template <class T>
+  void operator()(const char* key, const T& field, const char* doc = "") {
+    (*this)(key, field, Range{}, doc);
+  }
+  template <class T>
+  void operator()(const char* key, const T& field, const Range& range, const char* doc) {
+    const std::string path = detail::join_path(path_, key);
+    if constexpr (detail::is_scalar_v<T> || detail::is_vector<T>::value)
+      Reader::check_numbers(path, field, range, doc);
+    else
+      check(field, path);
+  }
+  // Choices: an enum holds one of its names by construction; a string is checked as read.
+  void choice(const char*, const std::string&, std::initializer_list<const char*>,
+              const char* = "") {}
+  template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+  void choice(const char*, const E&, const char* = "") {}
+
+  template <class T>
+  static void check(const T& value, const std::string& path) {
+    Checker sub(path);
+    visit_fields(sub, const_cast<T&>(value));
+    detail::call_validate(value, path, 0);
+  }
+
+ private:
+  std::string path_;
+};
+
+// Checker::check: `value` (a section built in code) as reading it from YAML would check it.
+template <class T>
+void check(const T& value, const std::string& path) {
+  Checker::check(value, path);
+}
+
+// One declared key: its full name, what it holds, its default, the values it accepts and its
+// description (the listing of --config-keys, and the tests that every key is documented and its
+// range enforced).
+struct KeyInfo {
+  std::string key;      // "render.samples"
+  std::string type;     // "an integer", "a list", "one of {fp32, bf16, auto}"
+  std::string value;    // the default, as YAML
+  std::string accepts;  // "in [2, 4096]"; empty: any value of the type
+  std::string doc;
+  Range range;  // numbers only
+};
+
+// Collects KeyInfo for every leaf field of a section (nested sections are walked).
+class Lister {
+ public:
+  explicit Lister(std::vector<KeyInfo>& out, std::string path = "")
+      : out_(out), path_(std::move(path)) {}
+
+  template <class T>
+  void operator()(const char* key, const T& field, const char* doc = "") {
+    (*this)(key, field, Range{}, doc);
+  }
+  template <class T>
+  void operator()(const char* key, const T& field, const Range& range, const char* doc) {
+    const std::string path = detail::join_path(path_, key);
+    if constexpr (!detail::is_scalar_v<T> && !detail::is_vector<T>::value) {
+      Lister sub(out_, path);
+      visit_fields(sub, const_cast<T&>(field));
+    } else {
+      std::string type;
+      if constexpr (detail::is_scalar_v<T>)
+        type = detail::type_label<T>();
+      else
+        type = "a list";
+      add(path, type, Writer::to_node(field), range, doc);
+    }
+  }
+  void choice(const char* key, const std::string& field, std::initializer_list<const char*> allowed,
+              const char* doc = "") {
+    std::string list;
+    for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
+    add(detail::join_path(path_, key), "one of {" + list + "}", YAML::Node(field), Range{}, doc);
+  }
+  template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+  void choice(const char* key, const E& field, const char* doc = "") {
+    std::string list;
+    for (const auto& n : choice_names(E{})) list += std::string(list.empty() ? "" : ", ") + n.first;
+    add(detail::join_path(path_, key), "one of {" + list + "}", YAML::Node(name_of(field)), Range{},
+        doc);
+  }
+
+ private:
+  void add(const std::string& path, const std::string& type, const YAML::Node& value,
+           const Range& range, const char* doc);
+  std::vector<KeyInfo>& out_;
+  std::string path_;
+};
+
+// Every key of section type T with its default (a default-constructed T).
+template <class T>
+std::vector<KeyInfo> keys() {
+  std::vector<KeyInfo> out;
+  T value{};
+  Lister lister(out);
+  visit_fields(lister, value);
+  return out;
+}
+
+// The keys as a text table: one line per key (name, type, default, accepted values, description).
+std::string describe(const std::vector<KeyInfo>& keys);
 
 // Parses a whole tree into T. `root_path` prefixes key names in errors (empty for the root).
 template <class T>

@@ -104,7 +104,7 @@ torch::Tensor row(const std::array<double, 3>& v) {
 // that the split file's indices and the names agree (data::camera_index refuses a number that
 // names one camera and indexes another), frames numbered from 0 with six digits.
 std::string easymocap_camera(int camera) {
-  char name[8];
+  char name[16];
   std::snprintf(name, sizeof name, "%02d", camera);
   return name;
 }
@@ -217,7 +217,7 @@ int64_t folder_bytes(const fs::path& dir) {
 }  // namespace
 
 Summary generate(const SynthConfig& c, const fs::path& out, bool force) {
-  validate_section(c, "");
+  config::check(c, "");
   const auto start = Clock::now();
   Summary summary;
   const std::string text = config_text(c);

@@ -30,6 +30,16 @@ expect 2 "transhuman-synth: error: --out is required" "$apps/transhuman-synth"
 expect 2 "unknown config key 'model.dparf.nkk' (did you mean 'model.dparf.nk'?)" "$apps/transhuman-train" --dry-run "${tiny[@]}" model.dparf.nkk=1
 expect 2 "config file '/nonexistent/config.yaml' does not exist" "$apps/transhuman-train" --dry-run --config /nonexistent/config.yaml
 expect 2 "--checkpoint is required" "$apps/transhuman-eval" "${tiny[@]}"
+# A value out of its declared range names the key, the range and what the key does.
+expect 2 "config key 'render.samples' = 1: must be in [2, 4096] (samples per ray" "$apps/transhuman-train" --dry-run "${tiny[@]}" render.samples=1
+# --config-keys lists every key (on stdout) and exits 0.
+keys=$("$apps/transhuman-eval" --config-keys)
+if [[ $? -eq 0 && "$keys" == *"render.termination_transmittance"*"in [0, 1)"* && $(printf '%s\n' "$keys" | grep -c .) -ge 90 ]]; then
+  echo "ok: transhuman-eval --config-keys lists $(printf '%s\n' "$keys" | grep -c .) keys"
+else
+  echo "FAIL: transhuman-eval --config-keys: $keys"
+  failures=$((failures + 1))
+fi
 # Precision: a bad value is refused by name, on the command line and in the config.
 expect 2 "--precision: fp16 not in {fp32,bf16,auto}" "$apps/transhuman-render" --precision fp16
 expect 2 "config key 'precision': 'half' is not one of" "$apps/transhuman-train" --dry-run "${tiny[@]}" precision=half

@@ -1,6 +1,8 @@
 #include <algorithm>
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 
 #include "core/config.hpp"
@@ -52,6 +54,96 @@ TEST_CASE("default.yaml lists every option with the compiled-in defaults", "[con
   CHECK(file_keys == default_keys);
   const Config loaded = load<Config>("configs/default.yaml");
   CHECK(YAML::Dump(to_tree(loaded)) == YAML::Dump(defaults));
+}
+
+TEST_CASE("every key is declared with a description, and the listing holds every key", "[config]") {
+  const auto declared = keys<Config>();
+  std::vector<std::string> listed, written;
+  for (const auto& k : declared) {
+    listed.push_back(k.key);
+    CHECK_FALSE(k.doc.empty());
+    if (k.doc.empty()) UNSCOPED_INFO("no description: " << k.key);
+  }
+  collect_keys(to_tree(Config{}), "", written);
+  std::sort(listed.begin(), listed.end());
+  std::sort(written.begin(), written.end());
+  CHECK(listed == written);
+  const std::string text = describe(declared);
+  CHECK_THAT(text, Catch::Contains("render.samples") && Catch::Contains("in [2, 4096]") &&
+                       Catch::Contains("the paper's fast variant"));
+  CHECK(std::count(text.begin(), text.end(), '\n') == long(declared.size()));
+}
+
+namespace {
+
+// `value` as YAML text that reads back exactly.
+std::string yaml_number(double value, bool integer) {
+  std::ostringstream out;
+  if (integer)
+    out << int64_t(value);
+  else
+    out << std::setprecision(17) << value;
+  return out.str();
+}
+
+// The defaults as a tree with the leaf at `key` ("a.b.c") set to `text`.
+YAML::Node with_leaf(const std::string& key, const std::string& text) {
+  YAML::Node root = to_tree(Config{});
+  std::stringstream parts(key);
+  std::string part;
+  std::vector<std::string> path;
+  while (std::getline(parts, part, '.')) path.push_back(part);
+  std::vector<YAML::Node> chain{root};
+  for (size_t i = 0; i + 1 < path.size(); ++i) chain.push_back(chain.back()[path[i]]);
+  chain.back()[path.back()] = YAML::Load(text);
+  return root;
+}
+
+}  // namespace
+
+TEST_CASE("every declared range holds its default and refuses values outside it, naming the key",
+          "[config]") {
+  int ranged = 0;
+  for (const auto& k : keys<Config>()) {
+    if (k.accepts.empty()) continue;
+    ++ranged;
+    INFO(k.key << " (" << k.accepts << ")");
+    const bool integer = k.type == "an integer";
+    CHECK(k.range.holds(YAML::Load(k.value).as<double>()));
+    std::vector<double> outside;
+    const double step = integer ? 1 : std::max(1e-6, 1e-6 * std::abs(k.range.high));
+    if (std::isfinite(k.range.low))
+      outside.push_back(k.range.low_open
+                            ? k.range.low
+                            : k.range.low -
+                                  (integer ? 1 : std::max(1e-6, 1e-6 * std::abs(k.range.low))));
+    if (std::isfinite(k.range.high))
+      outside.push_back(k.range.high_open ? k.range.high : k.range.high + step);
+    for (const double x : outside) {
+      const std::string text = yaml_number(x, integer);
+      INFO("value " << text);
+      CHECK_THAT(message_of([&] { from_tree<Config>(with_leaf(k.key, text)); }),
+                 Catch::Contains("config key '" + k.key + "' = ") &&
+                     Catch::Contains("must be " + k.accepts));
+    }
+  }
+  CHECK(ranged >= 30);
+  // Numbers must be finite, ranged or not.
+  CHECK_THAT(message_of([] { from_tree<Config>(with_leaf("train.lr", ".nan")); }),
+             Catch::Contains("config key 'train.lr' = nan: must be finite"));
+  CHECK_THAT(message_of([] { from_tree<Config>(with_leaf("seed", "1")); }),
+             Catch::Contains("<no error>"));
+  CHECK_THAT(message_of([] { from_tree<Config>(with_leaf("data.jitter.hue", "[0, .inf]")); }),
+             Catch::Contains("config key 'data.jitter.hue[1]' = inf: must be finite"));
+  // A section built in code is checked the same way.
+  th::RenderConfig render;
+  render.samples = 1;
+  CHECK_THAT(message_of([&] { check(render, "render"); }),
+             Catch::Contains("config key 'render.samples' = 1: must be in [2, 4096]"));
+  th::TrainConfig train;
+  train.warmup_epochs = train.epochs;
+  CHECK_THAT(message_of([&] { check(train, "train"); }),
+             Catch::Contains("config key 'train.warmup_epochs'"));
 }
 
 TEST_CASE("a child config inherits its parent and overrides win over both", "[config]") {

@@ -37,8 +37,8 @@ void train_step_and_render(const Ablation& ab) {
   rc.train_chunk_points = 1024;
   ab.configure(cfg, rc);
   cfg.grouping.num_tokens = static_cast<int>(ab.tokens);
-  validate_section(cfg, "model");
-  validate_section(rc, "render");
+  config::check(cfg, "model");
+  config::check(rc, "render");
   auto frame = test::synthetic_frame(ab.vertices, ab.tokens);
   if (ab.labels) ab.labels(frame.inputs);
   torch::manual_seed(1);

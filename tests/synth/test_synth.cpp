@@ -209,7 +209,8 @@ TEST_CASE("default.yaml states the defaults and data_splits/synthetic.yaml is it
                    "    target_views: all\n") != std::string::npos);
   CHECK(split.find("reference_views: [0, 7, 15]") != std::string::npos);
   CHECK(split.find("target_views: [3, 5, 10, 12, 18, 20]") != std::string::npos);
-  CHECK_THROWS_WITH(tiny({"frames=0"}), Catch::Contains("frames': must be >= 1, got 0"));
+  CHECK_THROWS_WITH(tiny({"frames=0"}),
+                    Catch::Contains("config key 'frames' = 0: must be >= 1 (frames per person)"));
   CHECK_THROWS_WITH(tiny({"people.unseen=[CoreView_313]"}), Catch::Contains("CoreView_313"));
 }
 
