@@ -20,6 +20,8 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <map>
+#include <set>
 #include <sstream>
 #include <thread>
 
@@ -176,6 +178,60 @@ torch::Tensor body_points(const Scene& s, const render::BodyDistance& body, int6
 }
 
 using bench::Report;
+
+// Paper-form floating-point operations per point of each per-point forward stage (METHOD 3.3,
+// 3.4), counted from the model's own weights: 2 x in x out per linear layer and application (per
+// reference view, or once after the mean over views), DPaRF's distances to the token centres and
+// its weighted sum over the Nk fields, FDI's attention over the V views; sampling: bilinear
+// reads of the pixel features (4 taps, a multiply and an add each). The fast paths do less work
+// than this (folded weights, fc_0 applied to the tokens), so the rate derived from it is the
+// paper-form work done per second.
+std::map<std::string, double> stage_flops(model::TransHuman& net, const ModelConfig& mc,
+                                          int64_t V) {
+  std::map<std::string, double> f;
+  const std::set<std::string> once{"heads.fc_3", "heads.alpha_fc", "heads.fc_4", "heads.rgb_fc"};
+  int64_t fc0_in = 0, pixel_channels = 0;
+  for (const auto& p : net->named_parameters()) {
+    const std::string& name = p.key();
+    const auto& w = p.value();
+    const std::string suffix = ".weight";
+    if (w.dim() != 2 || name.size() <= suffix.size() ||
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
+      continue;
+    const std::string layer = name.substr(0, name.size() - suffix.size());
+    std::string stage;
+    if (layer.rfind("fdi.", 0) == 0) stage = "fdi";
+    if (layer.rfind("heads.", 0) == 0) stage = "heads";
+    if (layer == "human.fc_0") stage = "dparf", fc0_in = w.size(1);
+    if (layer == "fdi.alpha_res_0") pixel_channels = w.size(1);
+    if (!stage.empty())
+      f[stage] += 2.0 * double(w.size(0) * w.size(1)) * (once.count(layer) ? 1 : V);
+  }
+  const double nk = mc.dparf.nk, nt = mc.grouping.num_tokens;
+  f["dparf"] += 9 * nt + 2 * V * nk * double(fc0_in);  // distances; weighted sum of the fields
+  f["fdi"] += 2.0 * V * V * (128 + 256);               // q k^T and the attention times u
+  f["sampling"] = 8.0 * double(pixel_channels) * V;    // bilinear reads of p_v
+  return f;
+}
+
+// GFLOP/s of the product the model's linear layers run under `products`: a (rows, 256) by
+// (256, 256) product, the shape of the per-point layers at a chunk, for about half a second.
+double product_limit(const model::Products& products, int64_t rows) {
+  torch::NoGradGuard ng;
+  const auto x = torch::randn({rows, 256}), w = torch::randn({256, 256}) * 0.05,
+             b = torch::zeros({256});
+  const auto in = products.bf16() ? x.to(torch::kBFloat16) : x;
+  products.linear(in, w, b);  // warm-up (weight reorders)
+  int64_t calls = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  double elapsed = 0;
+  while (elapsed < 0.5) {
+    products.linear(in, w, b);
+    ++calls;
+    elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  return 2.0 * double(rows) * 256 * 256 * double(calls) / elapsed / 1e9;
+}
 
 void shares_into(std::string& s, const render::Profile& p, double total) {
   std::vector<std::pair<std::string, double>> v(p.seconds.begin(), p.seconds.end());
@@ -517,6 +573,72 @@ int run(int argc, char** argv) {
           "half here).");
       r.line("Forward time per stage:");
       for (const auto& l : stage_lines) r.line("- " + l);
+      r.line("");
+      // Roofline per stage at each precision's fastest chunk: the paper-form work per point,
+      // the rate it was done at, and the limit of the product the layers run on, measured now.
+      const auto flops = stage_flops(net, mc, scene.in.ref_images.size(0));
+      r.line(
+          "Roofline of the forward stages (each precision at its fastest chunk; FLOP/point in "
+          "the paper's form, counted from the weights; limit: the layers' product, (rows, "
+          "256) x (256, 256) at the chunk's rows, measured in this run):");
+      r.line("");
+      r.line(
+          "| precision | form | chunk | stage | FLOP/point | seconds | GFLOP/s | limit GFLOP/s | "
+          "of limit |");
+      r.line("|---|---|---|---|---|---|---|---|---|");
+      for (size_t path = 0; path < precisions.size(); ++path) {
+        const Cell* fastest = nullptr;
+        int64_t chunk = 0;
+        for (const auto& [key, c] : best)
+          if (key.second == path && (!fastest || c.fwd > fastest->fwd))
+            fastest = &c, chunk = key.first;
+        if (!fastest) continue;
+        const auto products = products_of(precisions[path]);
+        const double limit = product_limit(products, chunk * scene.in.ref_images.size(0));
+        // The direct form (model.exact_shortcuts: false) does the paper-form work itself, so
+        // its rows are a true roofline; the fast form's rows are paper-form work per second.
+        render::Profile direct_profile;
+        double direct_points = 0;
+        {
+          ModelConfig direct_mc = mc;
+          direct_mc.exact_shortcuts = false;
+          torch::manual_seed(1);
+          model::TransHuman direct(direct_mc);
+          direct->train();
+          direct->set_products(products);
+          torch::NoGradGuard ng;
+          const auto cache = direct->prepare(scene.in, rc.cull_distance);
+          direct->forward(cache, pts.narrow(0, 0, chunk), dirs.narrow(0, 0, chunk));  // warm-up
+          direct->set_profile(&direct_profile);
+          const auto t0 = Clock::now();
+          while (seconds_since(t0) < min_time)
+            for (int64_t b = 0; b + chunk <= pts.size(0); b += chunk) {
+              direct->forward(cache, pts.narrow(0, b, chunk), dirs.narrow(0, b, chunk));
+              direct_points += double(chunk);
+            }
+          direct->set_profile(nullptr);
+        }
+        const std::pair<const char*, std::pair<const render::Profile*, double>> forms[] = {
+            {"fast", {&fastest->profile, fastest->fwd * fastest->fwd_s}},
+            {"direct", {&direct_profile, direct_points}}};
+        for (const auto& [form, measured] : forms)
+          for (const auto& [stage, per_point] : flops) {
+            const auto it = measured.first->seconds.find(stage);
+            if (it == measured.first->seconds.end() || it->second <= 0) continue;
+            const double rate = per_point * measured.second / it->second / 1e9;
+            r.line("| " + precisions[path] + " | " + form + " | " + std::to_string(chunk) + " | " +
+                   stage + " | " + fmt(per_point, 0) + " | " + fmt(it->second, 2) + " | " +
+                   fmt(rate, 1) + " | " + fmt(limit, 1) + " | " + fmt(100 * rate / limit, 0) +
+                   "% |");
+          }
+      }
+      r.line("");
+      r.line(
+          "fast: the default form (model.exact_shortcuts: true: folded weights, readouts, fc_0 on "
+          "the tokens), which does less than the paper-form work, so its GFLOP/s is paper-form "
+          "work per second and may exceed the limit. direct: model.exact_shortcuts: false, which "
+          "does that work, so its share is the distance from the limit. Sampling reads memory and "
+          "does no products: the product's limit is not its limit.");
       r.line("");
     }
   }
