@@ -23,25 +23,45 @@ TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& 
 }
 
 DPaRF::DPaRF(const DPaRFConfig& config)
-    : config_(config), fused_(config.pe_rounding == PeRounding::fused) {
-  const int64_t G = 3 + 6 * config.pe_freqs;
-  using P = torch::Tensor (DPaRF::*)(const torch::Tensor&, const FieldQuery&, torch::Tensor&,
-                                     torch::Tensor&) const;
-  using T =
-      torch::Tensor (DPaRF::*)(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const;
-  switch (config.coordinate) {
+    : config_(config), fused_(config.pe_rounding == PeRounding::fused) {}
+
+torch::Tensor DPaRF::coords_from_pass(const torch::Tensor& xs, const FieldQuery& q,
+                                      torch::Tensor& local, torch::Tensor& args) const {
+  switch (config_.coordinate) {
     case Coordinate::relative:
-      form_ = {G, true, P(&DPaRF::relative_coords), T(&DPaRF::relative_coords),
-               &DPaRF::relative_field_codes};
-      break;
+      return relative_coords(xs, q, local, args);
     case Coordinate::absolute:
-      form_ = {G, false, P(&DPaRF::absolute_coords), T(&DPaRF::absolute_coords),
-               &DPaRF::absolute_field_codes};
-      break;
+      return absolute_coords(xs, q, local, args);
     case Coordinate::none:
-      form_ = {0, false, P(&DPaRF::no_coords), T(&DPaRF::no_coords), &DPaRF::no_field_codes};
       break;
   }
+  return {};
+}
+
+torch::Tensor DPaRF::coords_from_tensors(const TokenFrames& frames, const torch::Tensor& xs,
+                                         const FieldQuery& q) const {
+  switch (config_.coordinate) {
+    case Coordinate::relative:
+      return relative_coords(frames, xs, q);
+    case Coordinate::absolute:
+      return absolute_coords(frames, xs, q);
+    case Coordinate::none:
+      break;
+  }
+  return {};
+}
+
+torch::Tensor DPaRF::field_codes(const TokenFrames& frames, const torch::Tensor& xs,
+                                 const torch::Tensor& index) const {
+  switch (config_.coordinate) {
+    case Coordinate::relative:
+      return relative_field_codes(frames, xs, index);
+    case Coordinate::absolute:
+      return absolute_field_codes(frames, xs, index);
+    case Coordinate::none:
+      break;
+  }
+  return no_field_codes(frames, xs, index);
 }
 
 torch::Tensor DPaRF::local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,
@@ -75,7 +95,7 @@ torch::Tensor DPaRF::absolute_field_codes(const TokenFrames&, const torch::Tenso
                                           const torch::Tensor& index) const {
   return sincos_encoding(xs, config_.pe_freqs, true, fused_)
       .unsqueeze(1)
-      .expand({index.size(0), index.size(1), form_.dim});
+      .expand({index.size(0), index.size(1), coord_dim()});
 }
 
 torch::Tensor DPaRF::relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
@@ -212,7 +232,7 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
   if (!xs.device().is_cpu() || xs.requires_grad()) return query_tensors(frames, xs);
   const int64_t nk = config_.nk, nt = frames.origins.size(0), n = xs.size(0);
   TORCH_CHECK(nt >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", nt);
-  const bool relative = form_.local;
+  const bool relative = config_.coordinate == Coordinate::relative;
   const int64_t nf2 = 2 * config_.pe_freqs;
   const auto x = xs.contiguous();
   const auto O = frames.origins.to(x.dtype()).contiguous();
@@ -238,7 +258,7 @@ FieldQuery DPaRF::query(const TokenFrames& frames, const torch::Tensor& xs) cons
           relative ? args.data_ptr<scalar_t>() : nullptr);
     });
   });
-  q.coords = (this->*form_.from_pass)(x, q, local, args);
+  q.coords = coords_from_pass(x, q, local, args);
   return q;
 }
 
@@ -256,7 +276,7 @@ FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& 
   const auto diff = xs.unsqueeze(1) - O.index_select(0, q.index.flatten()).view({n, nk, 3});
   const auto dist = diff.norm(2, -1);
   q.weight = torch::softmax(-dist / config_.softmax_temperature, 1);
-  q.coords = (this->*form_.from_tensors)(frames, xs, q);
+  q.coords = coords_from_tensors(frames, xs, q);
   return q;
 }
 
@@ -267,7 +287,7 @@ torch::Tensor DPaRF::features(const TokenFrames& frames, const torch::Tensor& to
   std::vector<torch::Tensor> per_view;
   for (int64_t v = 0; v < V; ++v) {
     auto t = tokens[v].index_select(0, q.index.flatten()).view({n, nk, -1});  // (N, Nk, C)
-    t = torch::cat({t, (this->*form_.per_field)(frames, xs, q.index)}, -1);   // [T_v(k); g_k]
+    t = torch::cat({t, field_codes(frames, xs, q.index)}, -1);                // [T_v(k); g_k]
     per_view.push_back((q.weight.unsqueeze(-1) * t).sum(1));
   }
   return torch::stack(per_view, 1);

@@ -32,7 +32,9 @@ class DPaRF {
   explicit DPaRF(const DPaRFConfig& config);
 
   // Width G of the coordinate encoding: 63 for relative/absolute (10 frequencies), 0 for none.
-  int64_t coord_dim() const { return form_.dim; }
+  int64_t coord_dim() const {
+    return config_.coordinate == Coordinate::none ? 0 : 3 + 6 * config_.pe_freqs;
+  }
 
   // xs: (N, 3) points in the SMPL frame. On CPU one pass per point (nearest fields, weights,
   // local coordinates, encoding arguments) plus one vectorised sin; elsewhere tensor ops
@@ -50,25 +52,15 @@ class DPaRF {
                          const torch::Tensor& xs) const;
 
  private:
-  // The coordinate encoding in its three uses: from the CPU pass's local coordinates and sine
-  // arguments, from tensors, and per field g_k (N, Nk, G).
-  struct CoordinateForm {
-    int64_t dim = 0;
-    bool local = false;  // the CPU pass computes local coordinates and encoding arguments
-    torch::Tensor (DPaRF::*from_pass)(const torch::Tensor& xs, const FieldQuery& q,
-                                      torch::Tensor& local, torch::Tensor& args) const;
-    torch::Tensor (DPaRF::*from_tensors)(const TokenFrames& frames, const torch::Tensor& xs,
-                                         const FieldQuery& q) const;
-    torch::Tensor (DPaRF::*per_field)(const TokenFrames& frames, const torch::Tensor& xs,
-                                      const torch::Tensor& index) const;
-  };
-  torch::Tensor no_coords(const torch::Tensor&, const FieldQuery&, torch::Tensor&,
-                          torch::Tensor&) const {
-    return {};
-  }
-  torch::Tensor no_coords(const TokenFrames&, const torch::Tensor&, const FieldQuery&) const {
-    return {};
-  }
+  // The coordinate encoding (dparf.coordinate: relative [the paper's], absolute, none) in its
+  // three uses: from the CPU pass's local coordinates and sine arguments, from tensors, and per
+  // field g_k (N, Nk, G). Each use branches on the coordinate where it is made.
+  torch::Tensor coords_from_pass(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
+                                 torch::Tensor& args) const;
+  torch::Tensor coords_from_tensors(const TokenFrames& frames, const torch::Tensor& xs,
+                                    const FieldQuery& q) const;
+  torch::Tensor field_codes(const TokenFrames& frames, const torch::Tensor& xs,
+                            const torch::Tensor& index) const;
   torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs,
                                const torch::Tensor& index) const;
   torch::Tensor absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&,
@@ -86,7 +78,6 @@ class DPaRF {
 
   DPaRFConfig config_;
   bool fused_;  // pe_rounding: fused [parity] (METHOD 3.3)
-  CoordinateForm form_;
 };
 
 }  // namespace th::model

@@ -178,12 +178,6 @@ FDIImpl::FDIImpl(const FDIConfig& config, int64_t pixel_channels) {
   }
   fc_1 = register_module("fc_1", torch::nn::Linear(256, 256));
   fc_2 = register_module("fc_2", torch::nn::Linear(256, 256));
-  if (config.appearance && config.human)
-    fusion_ = {&FDIImpl::cross, &FDIImpl::cross_folded, &FDIImpl::fold_cross};
-  else if (config.appearance)
-    fusion_ = {&FDIImpl::self, &FDIImpl::self_folded, &FDIImpl::fold_self};
-  else
-    fusion_ = {&FDIImpl::human_only, &FDIImpl::human_only_folded, &FDIImpl::fold_human_only};
 }
 
 torch::Tensor FDIImpl::attention(const torch::Tensor& q, const torch::Tensor& k) {
@@ -214,7 +208,8 @@ torch::Tensor layer_fp32(const torch::nn::Linear& l, const torch::Tensor& x, con
 }  // namespace
 
 torch::Tensor FDIImpl::forward(const torch::Tensor& s, const torch::Tensor& a, const Products& P) {
-  const auto o = (this->*fusion_.fuse)(s, a, P);
+  // The paper's cross-attention (both branches), "w/o h" (appearance only), "w/o a" (human only).
+  const auto o = key0 && key1 ? cross(s, a, P) : key0 ? self(s, a, P) : human_only(s, a, P);
   return torch::relu(layer(fc_2, torch::relu(layer(fc_1, o, P)), P));
 }
 
@@ -237,7 +232,9 @@ torch::Tensor FDIImpl::human_only(const torch::Tensor& s, const torch::Tensor&, 
 
 torch::Tensor FDIImpl::forward_folded(const FDIFolded& f, const torch::Tensor& s,
                                       const torch::Tensor& a, const Products& P) {
-  auto pre = (this->*fusion_.fuse_folded)(f, s, a, P);
+  auto pre = key0 && key1 ? cross_folded(f, s, a, P)
+             : key0       ? self_folded(f, s, a, P)
+                          : human_only_folded(f, s, a, P);
   return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();
 }
 
@@ -264,6 +261,10 @@ torch::Tensor FDIImpl::human_only_folded(const FDIFolded& f, const torch::Tensor
 // fc_1 is linear: folded into both value projections; each key projection shares one product
 // with its value projection. fc_1's bias joins the query side where there is one (the attention
 // weights multiply the value side).
+
+FDIFolded FDIImpl::fold() const {
+  return key0 && key1 ? fold_cross() : key0 ? fold_self() : fold_human_only();
+}
 
 FDIFolded FDIImpl::fold_cross() const {
   const auto& W1 = fc_1->weight;

@@ -41,7 +41,7 @@ class FDIImpl : public torch::nn::Module {
   static torch::Tensor attend(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d);
 
   // The folded weights of this fusion (model/shortcuts.hpp folds them once per frame).
-  FDIFolded fold() const { return (this->*fusion_.fold)(); }
+  FDIFolded fold() const;
 
   torch::nn::Linear alpha_res_0{nullptr};            // appearance: p_v -> a_v (384 -> 256)
   torch::nn::Linear key0{nullptr}, value0{nullptr};  // appearance side (spatial_key_value_0)
@@ -50,15 +50,8 @@ class FDIImpl : public torch::nn::Module {
 
  private:
   // One fusion of s and a (the paper's, and each ablation's), in its three forms: o_v from the
-  // layers, fc_1's input pre-activation from folded weights, and the folding itself. Chosen
-  // once in the constructor from FDIConfig.
-  struct Fusion {
-    torch::Tensor (FDIImpl::*fuse)(const torch::Tensor& s, const torch::Tensor& a,
-                                   const Products& p);
-    torch::Tensor (FDIImpl::*fuse_folded)(const FDIFolded& f, const torch::Tensor& s,
-                                          const torch::Tensor& a, const Products& p);
-    FDIFolded (FDIImpl::*fold)() const;
-  };
+  // layers, fc_1's input pre-activation from folded weights, and the folding itself. Which one
+  // runs follows from the branches the module has (FDIConfig): forward, forward_folded, fold.
   // Cross-attention over the views: queries from s, keys and values from a (the paper's).
   torch::Tensor cross(const torch::Tensor& s, const torch::Tensor& a, const Products& p);
   torch::Tensor cross_folded(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
@@ -74,8 +67,6 @@ class FDIImpl : public torch::nn::Module {
   torch::Tensor human_only_folded(const FDIFolded& f, const torch::Tensor& s,
                                   const torch::Tensor& a, const Products& p);
   FDIFolded fold_human_only() const;
-
-  Fusion fusion_;
 };
 TORCH_MODULE(FDI);
 

@@ -166,8 +166,4 @@ std::unique_ptr<NetworkForm> make_network_form(const ModelConfig& config, FDI fd
   return std::make_unique<LayerNetwork>(fdi, heads);
 }
 
-PaintFn paint_form(const ModelConfig& config) {
-  return config.encoder.fast_sampling ? &EncoderImpl::paint : &EncoderImpl::paint_direct;
-}
-
 }  // namespace th::model

@@ -64,10 +64,4 @@ class NetworkForm {
 std::unique_ptr<PixelForm> make_pixel_form(const ModelConfig& config, Encoder encoder, FDI fdi);
 std::unique_ptr<NetworkForm> make_network_form(const ModelConfig& config, FDI fdi, Heads heads);
 
-// How the body is painted (METHOD 3.1): sampled from the levels (encoder.fast_sampling) or the
-// reference's materialised reduction map.
-using PaintFn = torch::Tensor (EncoderImpl::*)(const EncodedViews&, const torch::Tensor&,
-                                               const torch::Tensor&) const;
-PaintFn paint_form(const ModelConfig& config);
-
 }  // namespace th::model

@@ -13,11 +13,9 @@ HeadsImpl::HeadsImpl(bool appearance, int64_t pixel_channels) {
   view_fc = register_module("view_fc", torch::nn::Linear(256 + kDirectionEncodingDim, 128));
   fc_4 = register_module("fc_4", torch::nn::Linear(128, 128));
   rgb_fc = register_module("rgb_fc", torch::nn::Linear(128, 3));
-  form_ = {&HeadsImpl::color_plain, &HeadsImpl::color_folded_plain, &HeadsImpl::fold_plain};
   if (appearance) {
     rgb_res_0 = register_module("rgb_res_0", torch::nn::Linear(pixel_channels, 256));
     rgb_res_1 = register_module("rgb_res_1", torch::nn::Linear(pixel_channels, 128));
-    form_ = {&HeadsImpl::color_pixels, &HeadsImpl::color_folded_pixels, &HeadsImpl::fold_pixels};
   }
 }
 

@@ -19,8 +19,7 @@ struct HeadsFolded {
 
 class HeadsImpl : public torch::nn::Module {
  public:
-  // appearance: the rgb_res_* residuals from p_v exist (false for the "w/o a" ablation); the
-  // colour head's form follows from it once, here.
+  // appearance: the rgb_res_* residuals from p_v exist (false for the "w/o a" ablation).
   HeadsImpl(bool appearance, int64_t pixel_channels);
 
   // e: (N, V, 256) fp32 or bf16 -> raw density (N) fp32. fc_3 in the products' compute type,
@@ -31,7 +30,8 @@ class HeadsImpl : public torch::nn::Module {
   // dir_code: (N, 27) gamma(d) -> raw rgb (N, 3) fp32. The products on e in the compute type.
   torch::Tensor color(const torch::Tensor& e, const torch::Tensor& p, const torch::Tensor& dir_code,
                       const Products& products = {}) {
-    return (this->*form_.color)(e, p, dir_code, products);
+    return rgb_res_0 ? color_pixels(e, p, dir_code, products)  // w/o a: no residuals from p_v
+                     : color_plain(e, p, dir_code, products);
   }
 
   // The same from folded weights (fold() below). readout: (N, V, 256) = the folded readout of
@@ -39,27 +39,20 @@ class HeadsImpl : public torch::nn::Module {
   torch::Tensor color_folded(const HeadsFolded& folded, const torch::Tensor& e,
                              const torch::Tensor& readout, const torch::Tensor& dir_code,
                              const Products& products = {}) {
-    return (this->*form_.color_folded)(folded, e, readout, dir_code, products);
+    return rgb_res_0 ? color_folded_pixels(folded, e, readout, dir_code, products)
+                     : color_folded_plain(folded, e, readout, dir_code, products);
   }
 
   // METHOD 9: view_fc's feature part composed with feature_fc, and with rgb_res_0 into one
   // 256-channel readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v.
-  HeadsFolded fold() const { return (this->*form_.fold)(); }
+  HeadsFolded fold() const { return rgb_res_0 ? fold_pixels() : fold_plain(); }
 
   torch::nn::Linear fc_3{nullptr}, alpha_fc{nullptr};
   torch::nn::Linear feature_fc{nullptr}, view_fc{nullptr}, fc_4{nullptr}, rgb_fc{nullptr};
   torch::nn::Linear rgb_res_0{nullptr}, rgb_res_1{nullptr};  // null w/o appearance
 
  private:
-  // The colour head with the residuals from p_v, or without them ("w/o a"), in its three forms.
-  struct Form {
-    torch::Tensor (HeadsImpl::*color)(const torch::Tensor&, const torch::Tensor&,
-                                      const torch::Tensor&, const Products&);
-    torch::Tensor (HeadsImpl::*color_folded)(const HeadsFolded&, const torch::Tensor&,
-                                             const torch::Tensor&, const torch::Tensor&,
-                                             const Products&);
-    HeadsFolded (HeadsImpl::*fold)() const;
-  };
+  // The colour head with the residuals from p_v, or without them ("w/o a").
   torch::Tensor color_pixels(const torch::Tensor& e, const torch::Tensor& p,
                              const torch::Tensor& dir_code, const Products& products);
   torch::Tensor color_plain(const torch::Tensor& e, const torch::Tensor& p,
@@ -75,8 +68,6 @@ class HeadsImpl : public torch::nn::Module {
   // Both colour forms: view_fc's direction part, and the tail fc_4, rgb_fc on the view mean.
   torch::Tensor direction_part(const torch::Tensor& dir_code, const Products& products) const;
   torch::Tensor tail(const torch::Tensor& c, const Products& products) const;
-
-  Form form_;
 };
 TORCH_MODULE(Heads);
 

@@ -32,7 +32,6 @@ TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
   heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));
   pixels_ = make_pixel_form(config, encoder, fdi);
   network_ = make_network_form(config, fdi, heads);
-  paint_ = paint_form(config);
 }
 
 FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) {
@@ -67,7 +66,10 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
     {
       ScopedTimer timer(profile_, "painting");
       const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
-      body.features = ((*encoder).*paint_)(enc, uv, in.visibility);
+      // Sampled from the levels (encoder.fast_sampling), or from the reference's materialised
+      // reduction map.
+      body.features = config_.encoder.fast_sampling ? encoder->paint(enc, uv, in.visibility)
+                                                    : encoder->paint_direct(enc, uv, in.visibility);
     }
     ScopedTimer timer(profile_, "transhe");
     body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);

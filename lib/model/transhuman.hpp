@@ -90,7 +90,6 @@ class TransHumanImpl : public torch::nn::Module {
   // The forms chosen at construction.
   std::shared_ptr<const PixelForm> pixels_;
   std::shared_ptr<const NetworkForm> network_;
-  PaintFn paint_;
 };
 TORCH_MODULE(TransHuman);
 
