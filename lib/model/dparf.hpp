@@ -36,9 +36,9 @@ class DPaRF {
     return config_.coordinate == Coordinate::none ? 0 : 3 + 6 * config_.pe_freqs;
   }
 
-  // xs: (N, 3) points in the SMPL frame. On CPU one pass per point (nearest fields, weights,
-  // local coordinates, encoding arguments) plus one vectorised sin; elsewhere tensor ops
-  // (query_tensors, the same formulas).
+  // xs: (N, 3) points in the SMPL frame. The nearest fields, their weights and the local
+  // coordinates' encoding arguments in one pass per point (model/kernels/nearest_fields.hpp),
+  // then the coordinate encoding. query_tensors: the same formulas as tensor operations.
   FieldQuery query(const TokenFrames& frames, const torch::Tensor& xs) const;
   FieldQuery query_tensors(const TokenFrames& frames, const torch::Tensor& xs) const;
 
@@ -52,25 +52,19 @@ class DPaRF {
                          const torch::Tensor& xs) const;
 
  private:
-  // The coordinate encoding (dparf.coordinate: relative [the paper's], absolute, none) in its
-  // three uses: from the CPU pass's local coordinates and sine arguments, from tensors, and per
-  // field g_k (N, Nk, G). Each use branches on the coordinate where it is made.
-  torch::Tensor coords_from_pass(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
-                                 torch::Tensor& args) const;
+  // The coordinate encoding (dparf.coordinate: relative [the paper's], absolute, none) of the
+  // tensor formulation, and per field g_k (N, Nk, G). Each use branches on the coordinate where
+  // it is made.
   torch::Tensor coords_from_tensors(const TokenFrames& frames, const torch::Tensor& xs,
                                     const FieldQuery& q) const;
   torch::Tensor field_codes(const TokenFrames& frames, const torch::Tensor& xs,
                             const torch::Tensor& index) const;
   torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs,
                                const torch::Tensor& index) const;
-  torch::Tensor absolute_coords(const torch::Tensor& xs, const FieldQuery&, torch::Tensor&,
-                                torch::Tensor&) const;
   torch::Tensor absolute_coords(const TokenFrames&, const torch::Tensor& xs,
                                 const FieldQuery&) const;
   torch::Tensor absolute_field_codes(const TokenFrames&, const torch::Tensor& xs,
                                      const torch::Tensor& index) const;
-  torch::Tensor relative_coords(const torch::Tensor& xs, const FieldQuery& q, torch::Tensor& local,
-                                torch::Tensor& args) const;
   torch::Tensor relative_coords(const TokenFrames& frames, const torch::Tensor& xs,
                                 const FieldQuery& q) const;
   torch::Tensor relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,

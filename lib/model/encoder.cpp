@@ -202,11 +202,11 @@ Taps PixelGeometry::stacked_level_taps(const torch::Tensor& uv, const torch::Ten
     offsets.push_back(offset);
     offset += views * h * w;
   }
-  return multi_level_taps(uv, view, level_sizes, offsets, height, width);
+  return kernels::level_taps(uv, view, {level_sizes, offsets, height, width});
 }
 
 Taps PixelGeometry::image_taps(const torch::Tensor& uv, const torch::Tensor& view) const {
-  return multi_level_taps(uv, view, {{height, width}}, {0}, height, width);
+  return kernels::level_taps(uv, view, {{{height, width}}, {0}, height, width});
 }
 
 std::pair<torch::Tensor, torch::Tensor> PixelGeometry::point_view_rows(const torch::Tensor& uv) {
@@ -216,9 +216,9 @@ std::pair<torch::Tensor, torch::Tensor> PixelGeometry::point_view_rows(const tor
 }
 
 torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_taps) const {
-  auto out = weighted_gather(table, level_taps, table_grad_sink);
+  auto out = kernels::weighted_gather(table, level_taps, table_grad_sink);
   if (image_weight.defined())
-    out.addmm_(weighted_gather(image_table, image_taps), image_weight.t());
+    out.addmm_(kernels::weighted_gather(image_table, image_taps), image_weight.t());
   return out.add_(bias);
 }
 
@@ -271,12 +271,12 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
     const int64_t taps_per_level = (l.size(2) == g.height && l.size(3) == g.width) ? 4 : 9;
     Taps t{level_taps.index.narrow(1, col, taps_per_level) - offset,
            level_taps.weight.narrow(1, col, taps_per_level)};
-    parts.push_back(weighted_gather(to_table(l), t));
+    parts.push_back(kernels::weighted_gather(to_table(l), t));
     offset += l.size(0) * l.size(2) * l.size(3);
     col += taps_per_level;
   }
   if (upsample_color) {
-    const auto rgb = weighted_gather(to_table(enc.images), image_taps);
+    const auto rgb = kernels::weighted_gather(to_table(enc.images), image_taps);
     parts.push_back(F::linear(rgb, upsample_color->weight.flatten(1), upsample_color->bias));
   }
   return torch::cat(parts, 1);
@@ -309,7 +309,7 @@ std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv,
   TORCH_CHECK(uv.device().is_cpu(), "window taps: uv must be on CPU");
   // grid_sample's 2 x 2 taps into the (V H W) rows of the whole images, then moved to the rows
   // of the windows; a point with a tap outside its view's window gets row 0 and weight 0.
-  Taps t = multi_level_taps(uv, view, {{H, W}}, {0}, H, W);
+  Taps t = kernels::level_taps(uv, view, {{{H, W}}, {0}, H, W});
   const int64_t M = t.index.size(0), T_ = t.index.size(1), views = int64_t(offset.size());
   auto inside = torch::empty({M}, t.index.options().dtype(torch::kBool));
   int64_t* ti = t.index.data_ptr<int64_t>();

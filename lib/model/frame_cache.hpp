@@ -6,9 +6,10 @@
 // the transformer and the layer weights (training).
 //
 // A stage holds one of its forms (std::variant): the type says which form is in use, and the
-// form was chosen once, when the model was built (model/forms.hpp). Each form lists its tensors
-// in `visit`; a test walks the autograd graph of the per-point network and fails when it
-// reaches per-frame work through a tensor that no stage visits (tests/model/test_frame_cache.cpp).
+// form was chosen once, when the plan that made it was built (model/plan.hpp). Each form lists
+// its tensors in `visit`; a test walks the autograd graph of the per-point network and fails
+// when it reaches per-frame work through a tensor that no stage visits
+// (tests/model/test_frame_cache.cpp).
 // Parameters that a stage merely refers to are leaves already and are not visited.
 
 #include <torch/types.h>
@@ -116,6 +117,7 @@ struct FoldedWeights {
 using NetworkStage = std::variant<LayerWeights, FoldedWeights>;
 
 struct FrameCache {
+  bool training = false;  // made by the training plan (autograd recorded), else the inference one
   FrameGeometry geometry;
   PixelStage pixels;
   HumanStage human;

@@ -1,7 +1,6 @@
 #include "model/human.hpp"
 
 #include "core/error.hpp"
-#include "model/sampling.hpp"
 #include "model/shortcuts.hpp"
 #include "model/spc.hpp"
 
@@ -26,8 +25,7 @@ HumanStage TokenFieldsImpl::prepare(const FrameInputs& in, const PaintedBody& bo
   return TokenStage{t.frames, t.features};
 }
 
-torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Tensor& xs,
-                                       const Products&) {
+torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Tensor& xs) {
   const auto& st = std::get<TokenStage>(stage);
   const auto h = dparf.features(st.frames, st.tokens, xs);  // (N, V, C + G)
   return torch::relu(fc_0(h));
@@ -36,21 +34,6 @@ torch::Tensor TokenFieldsImpl::forward(const HumanStage& stage, const torch::Ten
 HumanStage TokenTableImpl::prepare(const FrameInputs& in, const PaintedBody& body) {
   auto t = tokens(in, body);
   return TokenTableStage{t.frames, token_table(t.features, fc_0), {}};  // METHOD 9 (shortcuts.hpp)
-}
-
-torch::Tensor TokenTableImpl::forward(const HumanStage& stage, const torch::Tensor& xs,
-                                      const Products& products) {
-  const auto& st = std::get<TokenTableStage>(stage);
-  // The token table's rows of the Nk nearest fields, then fc_0's coordinate part.
-  const auto q = dparf.query(st.frames, xs);
-  const auto n = xs.size(0);
-  auto s = weighted_gather(st.table, {q.index, q.weight}, st.table_grad_sink).view({n, -1, 256});
-  if (q.coords.defined()) {
-    const auto C = fc_0->weight.size(1) - q.coords.size(1);
-    s.add_(
-        products.linear_fp32(q.coords, fc_0->weight.narrow(1, C, q.coords.size(1))).unsqueeze(1));
-  }
-  return s.relu_();
 }
 
 std::shared_ptr<HumanRepresentation> make_human_representation(const ModelConfig& config) {

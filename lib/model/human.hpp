@@ -13,7 +13,6 @@
 #include "model/dparf.hpp"
 #include "model/frame_cache.hpp"
 #include "model/inputs.hpp"
-#include "model/precision.hpp"
 #include "model/transhe.hpp"
 
 namespace th::model {
@@ -22,10 +21,10 @@ class HumanRepresentation : public torch::nn::Module {
  public:
   // The per-frame part: the painted body -> the human stage of the frame state.
   virtual HumanStage prepare(const FrameInputs& in, const PaintedBody& body) = 0;
-  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32; its
-  // products as `products` says (model/precision.hpp). `stage` is what prepare() made.
-  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
-                                const Products& products) = 0;
+  // The per-point part with the module's own layers. xs: (N, 3) points in the SMPL frame -> s:
+  // (N, V, 256) fp32. `stage` is what prepare() made. (The token table of METHOD 9 is read by
+  // the plan, model/plan.cpp, whose products apply fc_0's coordinate part.)
+  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) = 0;
 };
 
 // TransHE (tokens, transhe.hpp) + DPaRF (dparf.hpp) + fc_0 (reference names: ViT.*, fc_0.*),
@@ -35,8 +34,7 @@ class TokenFieldsImpl : public HumanRepresentation {
   explicit TokenFieldsImpl(const ModelConfig& config);
 
   HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
-                        const Products& products) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
 
   TransHE vit{nullptr};  // null: the "w/o TransHE" ablation
   torch::nn::Linear fc_0{nullptr};
@@ -52,13 +50,11 @@ class TokenFieldsImpl : public HumanRepresentation {
 };
 
 // The same network with METHOD 9's exact shortcut: fc_0's token part applied to the tokens once
-// per frame (TokenTableStage), a weighted gather of Nk rows per point.
+// per frame (TokenTableStage); the plan reads it per point by a weighted gather of Nk rows.
 class TokenTableImpl : public TokenFieldsImpl {
  public:
   using TokenFieldsImpl::TokenFieldsImpl;
   HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
-                        const Products& products) override;
 };
 
 // Factory: the representation named by config.representation, in the form config.exact_shortcuts

@@ -1,7 +1,7 @@
 #pragma once
 // The network of METHOD 3 as one plain forward pass, in the paper's order: painting (3.1),
 // TransHE (3.2), DPaRF (3.3), FDI and the heads (3.4). It is the definition that the fast
-// forms of TransHumanImpl (model/forms.hpp, the exact shortcuts of METHOD 9, the CPU kernels)
+// plans of TransHumanImpl (model/plan.hpp: the exact shortcuts of METHOD 9, the CPU kernels)
 // are tested against: plain LibTorch operations only, on any device and under autograd, with
 // the model's own parameters (it creates none) and each ablation of ModelConfig an `if` where
 // the paper's text varies it.

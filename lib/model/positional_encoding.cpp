@@ -1,9 +1,10 @@
 #include "model/positional_encoding.hpp"
 
-#include <ATen/Parallel.h>
 #include <torch/torch.h>
 
 #include <cmath>
+
+#include "model/kernels/encoding.hpp"
 
 namespace th::model {
 
@@ -23,35 +24,10 @@ torch::Tensor pe_phases(int64_t num_freqs, const torch::TensorOptions& options) 
 torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool include_input,
                               bool fused) {
   TORCH_CHECK(x.dim() == 2, "positional encoding input must be (N, D), got ", x.sizes());
-  const auto n = x.size(0), dims = x.size(1);
-  const auto freqs = pe_frequencies(num_freqs, x.options()).view({1, -1, 1});
-  const auto phases = pe_phases(num_freqs, x.options()).view({1, -1, 1});
-  torch::Tensor embed;
-  if (fused && x.device().is_cpu()) {
-    // The argument x * f + phase rounded once (IEEE fma, whatever the CPU), then the same
-    // vectorised sin as the reference's torch.sin.
-    auto args = torch::empty({n, 2 * num_freqs, dims}, x.options());
-    const auto xc = x.contiguous();
-    const auto fc = freqs.flatten().contiguous(), pc = phases.flatten().contiguous();
-    AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "sincos_encoding_fused", [&] {
-      const scalar_t* xp = xc.data_ptr<scalar_t>();
-      const scalar_t* fp = fc.data_ptr<scalar_t>();
-      const scalar_t* pp = pc.data_ptr<scalar_t>();
-      scalar_t* a = args.data_ptr<scalar_t>();
-      at::parallel_for(0, n, 1024, [&](int64_t begin, int64_t end) {
-        for (int64_t i = begin; i < end; ++i)
-          for (int64_t k = 0; k < 2 * num_freqs; ++k)
-            for (int64_t d = 0; d < dims; ++d)
-              a[(i * 2 * num_freqs + k) * dims + d] = std::fma(xp[i * dims + d], fp[k], pp[k]);
-      });
-    });
-    embed = args.sin_();
-  } else if (fused) {
-    embed = torch::sin(torch::addcmul(phases, x.unsqueeze(1), freqs));  // fused on GPUs
-  } else {
-    embed = torch::sin(x.unsqueeze(1) * freqs + phases);
-  }
-  embed = embed.view({n, -1});
+  const auto n = x.size(0);
+  const auto embed = torch::sin(kernels::sincos_arguments(x, pe_frequencies(num_freqs, x.options()),
+                                                          pe_phases(num_freqs, x.options()), fused))
+                         .view({n, -1});
   return include_input ? torch::cat({x, embed}, 1) : embed;
 }
 

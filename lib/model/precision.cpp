@@ -2,7 +2,6 @@
 
 #include <ATen/Context.h>
 #include <spdlog/spdlog.h>
-#include <torch/csrc/autograd/custom_function.h>
 #include <torch/torch.h>
 
 #include <algorithm>
@@ -10,45 +9,11 @@
 #include "core/error.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
+#include "model/kernels/onednn_linear.hpp"
 
 namespace th::model {
-namespace {
 
 namespace F = torch::nn::functional;
-
-// x2 (M, in) fp32 -> (M, out) through oneDNN: dense -> oneDNN layout, product, back to dense.
-torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w,
-                             const torch::Tensor& b) {
-  const c10::optional<torch::Tensor> bias =
-      b.defined() ? c10::optional<torch::Tensor>(b) : c10::nullopt;
-  return at::mkldnn_linear(x2.contiguous().to_mkldnn(), w.contiguous(), bias).to_dense();
-}
-
-// The oneDNN product with its backward (oneDNN's own derivative wants oneDNN-layout gradients):
-// dx = g w (oneDNN), dw = g^T x and db = sum g (BLAS; reductions over the rows). No bias: an
-// empty tensor (a custom function's inputs must be defined tensors).
-struct OneDnnLinear : torch::autograd::Function<OneDnnLinear> {
-  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& x2,
-                               const torch::Tensor& w, const torch::Tensor& b) {
-    ctx->save_for_backward({x2, w});
-    const bool bias = b.numel() > 0;
-    ctx->saved_data["bias"] = bias;
-    return onednn_product(x2, w, bias ? b : torch::Tensor());
-  }
-  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
-                                                 torch::autograd::variable_list grads) {
-    const auto saved = ctx->get_saved_variables();
-    const auto &x2 = saved[0], &w = saved[1];
-    const auto g = grads[0].contiguous();
-    torch::Tensor gx, gw, gb;
-    if (ctx->needs_input_grad(0)) gx = onednn_product(g, w.t().contiguous(), {});
-    if (ctx->needs_input_grad(1)) gw = torch::mm(g.t(), x2);
-    if (ctx->saved_data["bias"].toBool() && ctx->needs_input_grad(2)) gb = g.sum(0);
-    return {gx, gw, gb};
-  }
-};
-
-}  // namespace
 
 bool onednn_products_agree() {
   static const bool agree = [] {
@@ -59,7 +24,7 @@ bool onednn_products_agree() {
     const auto w = ((torch::arange(96 * 64) % 13) - 6).to(torch::kFloat).div(13).reshape({96, 64});
     const auto b = torch::arange(96).to(torch::kFloat).div(96);
     const auto ref = F::linear(x, w, b);
-    const double err = (onednn_product(x, w, b) - ref).abs().max().item<double>();
+    const double err = (kernels::onednn_linear(x, w, b) - ref).abs().max().item<double>();
     return err <= 1e-5 * std::max(1.0, ref.abs().max().item<double>());
   }();
   return agree;
@@ -78,17 +43,11 @@ torch::Tensor Products::linear_fp32(const torch::Tensor& x, const torch::Tensor&
                                     const torch::Tensor& b) const {
   const auto xf = fp32(x);
   const int64_t in = xf.size(-1), rows = in > 0 ? xf.numel() / in : 0;
-  if (!onednn || !xf.device().is_cpu() || rows < kOneDnnMinRows ||
-      xf.scalar_type() != torch::kFloat)
+  if (!onednn || rows < kOneDnnMinRows || xf.scalar_type() != torch::kFloat)
     return F::linear(xf, w, b);
   auto sizes = xf.sizes().vec();
   sizes.back() = w.size(0);
-  const auto x2 = xf.reshape({rows, in});
-  const bool grad = torch::GradMode::is_enabled() &&
-                    (x2.requires_grad() || w.requires_grad() || (b.defined() && b.requires_grad()));
-  return (grad ? OneDnnLinear::apply(x2, w, b.defined() ? b : torch::empty({0}, w.options()))
-               : onednn_product(x2, w, b))
-      .view(sizes);
+  return kernels::onednn_linear(xf.reshape({rows, in}), w, b).view(sizes);
 }
 
 torch::Tensor Products::fp32(const torch::Tensor& x) {

@@ -1,19 +1,18 @@
 #pragma once
-// Mixed precision: which operation of the network runs in which floating-point type. Decided
-// here and nowhere else; the stages call Products::linear for their products and
-// FrameAutocast around the per-frame modules, and never cast on their own.
+// Mixed precision: which operation of the network runs in which floating-point type. The
+// Products a plan is built with (model/plan.hpp) decide it: the plan calls Products::linear for
+// its per-point products, Products::fp32 where their outputs meet fp32 work, and FrameAutocast
+// around the per-frame modules. No function takes the precision as an argument.
 //
-// | work                                                        | fp32            | bf16 |
-// |-------------------------------------------------------------|-----------------|-----------------------------|
-// | per-point products: FDI's key/value projections and fc_2,   | fp32: oneDNN or | bf16 operands,
-// fp32         | |   the density head's fc_3, the colour head's feature product|   BLAS (below)  |
-// accumulation (oneDNN)     | | per-frame modules: ResNet encoder, TransHE (convolutions,   | fp32
-// | autocast to bf16; outputs   | |   linear layers, attention products)                        |
-// |   cast back to fp32         | | positional encodings, DPaRF's distances, nearest fields and |
-// fp32            | fp32                        | |   weights, gathers of tables, the view
-// attention's softmax, |                 |                             | |   the last layers of
-// both heads, compositing, losses,       |                 |                             | |
-// metrics, optimiser state and master weights, checkpoints  |                 | |
+// What runs in which type:
+// - per-point products (FDI's key/value projections and fc_2, the density head's fc_3, the
+//   colour head's feature product): fp32 through oneDNN or BLAS (below); bf16 operands with
+//   fp32 accumulation (oneDNN) under bf16.
+// - per-frame modules (ResNet encoder, TransHE: convolutions, linear layers, attention
+//   products): fp32; autocast to bf16 under bf16, outputs cast back to fp32.
+// - everything else (positional encodings, DPaRF's distances, nearest fields and weights,
+//   gathers of tables, the view attention's softmax, the last layers of both heads,
+//   compositing, losses, metrics, optimiser state and master weights, checkpoints): fp32.
 //
 // A bf16 product's output stays bf16 only where another product or a ReLU follows; the
 // project's own kernels (the view attention, weighted gathers) take fp32, so their inputs are

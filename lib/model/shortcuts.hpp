@@ -22,15 +22,15 @@ class HeadsImpl;
 // 1. Human stage. fc_0 is linear and DPaRF's Nk weights sum to 1, so fc_0's token part is
 // applied to the Nt tokens once per frame instead of to Nk tokens at every point:
 // table (Nt, V * 256) = fc_0_tokens(T_v(c)) + bias, view-major within a row. Read per point by
-// TokenTableImpl::forward (weighted_gather of the Nk rows, plus fc_0's coordinate part).
+// the plan (Plan::human: a weighted gather of the Nk rows, plus fc_0's coordinate part).
 // tokens: (V, Nt, C).
 torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& fc_0);
 
 // 2. Folded weights. FDI: fc_1 is folded into both value projections and each key projection
 // shares one product with its value projection (FDIImpl::fold, for each fusion; read by
-// FDIImpl::forward_folded). Colour head: view_fc's feature part is composed with feature_fc, and
-// with rgb_res_0 into one 256-channel readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v
-// (HeadsImpl::fold; read by HeadsImpl::color_folded).
+// Plan::fuse). Colour head: view_fc's feature part is composed with feature_fc, and with
+// rgb_res_0 into one 256-channel readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v
+// (HeadsImpl::fold; read by Plan::colour).
 FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads);
 
 // 3. Pixel stage. A linear layer that reads p_v commutes with bilinear upsampling and with

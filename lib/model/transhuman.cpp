@@ -10,13 +10,10 @@
 #include "geometry/camera.hpp"
 #include "model/positional_encoding.hpp"
 #include "model/pretrained.hpp"
-#include "model/shortcuts.hpp"
 #include "render/body_distance.hpp"
 #include "render/chunks.hpp"
 
 namespace th::model {
-
-using render::ScopedTimer;
 
 TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
   encoder =
@@ -30,14 +27,40 @@ TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
   if (config.fdi.human) human = register_module("human", make_human_representation(config));
   fdi = register_module("fdi", FDI(config.fdi, encoder->pixel_channels()));
   heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));
-  pixels_ = make_pixel_form(config, encoder, fdi);
-  network_ = make_network_form(config, fdi, heads);
+}
+
+void TransHumanImpl::set_profile(render::Profile* profile) {
+  profile_ = profile;
+  plans_[0] = plans_[1] = nullptr;
+}
+
+void TransHumanImpl::set_products(const Products& products) {
+  products_ = products;
+  plans_[0] = plans_[1] = nullptr;
+}
+
+const Plan& TransHumanImpl::plan(bool training, const torch::Device& device) {
+  auto& plan = plans_[training ? 1 : 0];
+  if (!plan || plan->target().device != device) {
+    const PlanTarget target{products_, device, training};
+    if (profile_)
+      plan = std::make_shared<const ProfiledPlan>(*this, target, profile_);
+    else
+      plan = std::make_shared<const Plan>(*this, target);
+  }
+  return *plan;
+}
+
+const Plan& TransHumanImpl::plan_of(const FrameCache& cache) {
+  return plan(cache.training, cache.geometry.K.device());
 }
 
 FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) {
   in.check();
   FrameCache cache;
+  cache.training = torch::GradMode::is_enabled();
   const auto opts = in.ref_images.options();
+  const Plan& plan = this->plan(cache.training, opts.device());
   auto& geo = cache.geometry;
   geo.K = in.K.to(opts);
   geo.R = in.R.to(opts);
@@ -47,98 +70,54 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
   if (cull_distance > 0)
     geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
 
-  // Encoder (METHOD 3.1).
-  EncodedViews enc;
-  {
-    ScopedTimer timer(profile_, "encoder");
-    {
-      FrameAutocast autocast(products_, opts.device());
-      enc = encoder->forward(in.ref_images);
-    }
-    for (auto& level : enc.levels) level = Products::fp32(level);
-  }
-  cache.network = network_->prepare();
-
-  // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.2, 3.3).
+  const auto enc = plan.encode(in.ref_images);  // the encoder (METHOD 3.1)
+  cache.network = plan.weights();               // the layers' weights, folded or not (9)
   if (human) {
+    // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.1-3.3).
     PaintedBody body;
     const auto vertices = in.vertices.to(opts);
-    {
-      ScopedTimer timer(profile_, "painting");
-      const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
-      // Sampled from the levels (encoder.fast_sampling), or from the reference's materialised
-      // reduction map.
-      body.features = config_.encoder.fast_sampling ? encoder->paint(enc, uv, in.visibility)
-                                                    : encoder->paint_direct(enc, uv, in.visibility);
-    }
-    ScopedTimer timer(profile_, "transhe");
+    const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
+    body.features = plan.paint(enc, uv, in.visibility);
     body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);
-    {
-      FrameAutocast autocast(products_, opts.device());
-      cache.human = human->prepare(in, body);
-    }
-    std::visit(
-        [](auto& stage) {
-          stage.visit([](torch::Tensor& t, torch::Tensor*) {
-            if (t.defined()) t = Products::fp32(t);
-          });
-        },
-        cache.human);
+    cache.human = plan.represent(in, body);
   }
-
-  // What per-point sampling reads of the encoder output (the appearance branch of FDI and the
-  // colour head), in the pixel form chosen at construction.
-  ScopedTimer timer(profile_, "readouts");
-  cache.pixels = pixels_->prepare({enc, geo, in.vertices, cull_distance}, cache.network);
+  // What per-point sampling reads of the encoder output (FDI's appearance branch, the colour head).
+  cache.pixels = plan.pixels(enc, geo, in.vertices, cull_distance, cache.network);
   return cache;
 }
 
-TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& cache, const torch::Tensor& pts) {
+TransHumanImpl::Trunk TransHumanImpl::trunk(const Plan& plan, const FrameCache& cache,
+                                            const torch::Tensor& pts) {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
   const auto& geo = cache.geometry;
-  torch::Tensor s, a, uv;  // FDI's inputs s_v, a_v (METHOD 3.3, 3.4) and the projections
-  if (human) {
-    ScopedTimer timer(profile_, "dparf");
-    s = human->forward(cache.human, torch::mm(pts - geo.Th, geo.Rh), products_);
-  }
-  {
-    ScopedTimer timer(profile_, "sampling");
-    uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
-    a = pixels_->appearance(cache.pixels, uv);
-    if (a.defined()) a.relu_();
-  }
-  ScopedTimer timer(profile_, "fdi");
-  return {network_->trunk(cache.network, s, a, products_), uv};
+  torch::Tensor s;  // s_v, the human representation at the points (METHOD 3.3)
+  if (human) s = plan.human(cache, torch::mm(pts - geo.Th, geo.Rh));
+  // The points' projections into the reference views, and a_v (METHOD 3.4).
+  const auto uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
+  auto a = plan.appearance(cache, uv);
+  if (a.defined()) a.relu_();
+  return {plan.fuse(cache, s, a), uv};  // e_v = FDI(s_v, a_v)
 }
 
-torch::Tensor TransHumanImpl::color(const FrameCache& cache, const Trunk& t,
+torch::Tensor TransHumanImpl::color(const Plan& plan, const FrameCache& cache, const Trunk& t,
                                     const torch::Tensor& dirs) {
-  torch::Tensor pix;  // p_v, or its folded readout (exact shortcuts)
-  {
-    ScopedTimer timer(profile_, "sampling");
-    pix = pixels_->colour(cache.pixels, t.uv);
-  }
-  ScopedTimer timer(profile_, "heads");
+  const auto pixels = plan.colour_pixels(cache, t.uv);  // p_v, or its folded readout
   const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
-  return network_->colour(cache.network, t.e, pix, code, products_);
+  return plan.colour(cache, t.e, pixels, code);
 }
 
 torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tensor& pts,
                                       const torch::Tensor& dirs) {
-  const auto t = trunk(cache, pts);
-  torch::Tensor sigma;
-  {
-    ScopedTimer timer(profile_, "heads");
-    sigma = heads->density(t.e, products_);
-  }
-  const auto rgb = color(cache, t, dirs);
+  const Plan& plan = plan_of(cache);
+  const auto t = trunk(plan, cache, pts);
+  const auto sigma = plan.density(t.e);
+  const auto rgb = color(plan, cache, t, dirs);
   return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
 }
 
 torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tensor& pts) {
-  const auto t = trunk(cache, pts);
-  ScopedTimer timer(profile_, "heads");
-  return heads->density(t.e, products_);
+  const Plan& plan = plan_of(cache);
+  return plan.density(trunk(plan, cache, pts).e);
 }
 
 TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& cache,
@@ -146,23 +125,16 @@ TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCac
                                                                   const torch::Tensor& directions) {
   TORCH_CHECK(directions.dim() == 2 && directions.size(1) == 3,
               "forward_directions: directions must be (K, 3), got ", directions.sizes());
-  const auto t = trunk(cache, pts);
+  const Plan& plan = plan_of(cache);
+  const auto t = trunk(plan, cache, pts);
   DirectionalRaw out;
-  torch::Tensor pix;
-  {
-    ScopedTimer timer(profile_, "heads");
-    out.sigma = heads->density(t.e, products_);
-  }
-  {
-    ScopedTimer timer(profile_, "sampling");
-    pix = pixels_->colour(cache.pixels, t.uv);
-  }
-  ScopedTimer timer(profile_, "heads");
+  out.sigma = plan.density(t.e);
+  const auto pixels = plan.colour_pixels(cache, t.uv);
   std::vector<torch::Tensor> rgb;
   const auto unit = directions.to(pts.options()) / directions.to(pts.options()).norm(2, 1, true);
   for (int64_t k = 0; k < unit.size(0); ++k) {
     const auto code = direction_encoding(unit[k].unsqueeze(0).expand({pts.size(0), 3}));
-    rgb.push_back(network_->colour(cache.network, t.e, pix, code, products_));
+    rgb.push_back(plan.colour(cache, t.e, pixels, code));
   }
   out.rgb = torch::stack(rgb);
   return out;
@@ -171,22 +143,20 @@ TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCac
 torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache,
                                                     const torch::Tensor& pts,
                                                     const torch::Tensor& dirs) {
-  const auto t = trunk(cache, pts);
-  torch::Tensor sigma;
-  {
-    ScopedTimer timer(profile_, "heads");
-    sigma = heads->density(t.e, products_);
-  }
+  const Plan& plan = plan_of(cache);
+  const auto t = trunk(plan, cache, pts);
+  const auto sigma = plan.density(t.e);
   const auto idx = (sigma > 0).nonzero().flatten();
   // Every point has density (a translucent model): colour for all rows, without copying the
   // trunk's (N, V, 256) output row by row.
-  if (idx.size(0) == pts.size(0)) return torch::cat({color(cache, t, dirs), sigma.unsqueeze(1)}, 1);
+  if (idx.size(0) == pts.size(0))
+    return torch::cat({color(plan, cache, t, dirs), sigma.unsqueeze(1)}, 1);
   auto raw = torch::zeros({pts.size(0), 4}, sigma.options());
   raw.select(1, 3).copy_(sigma);
   if (idx.size(0) == 0) return raw;
   const Trunk sub{t.e.index_select(0, idx), t.uv.index_select(0, idx)};
   raw.index_copy_(0, idx,
-                  torch::cat({color(cache, sub, dirs.index_select(0, idx)),
+                  torch::cat({color(plan, cache, sub, dirs.index_select(0, idx)),
                               sigma.index_select(0, idx).unsqueeze(1)},
                              1));
   return raw;

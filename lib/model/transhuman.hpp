@@ -2,7 +2,8 @@
 // The composed TransHuman network (METHOD 3): encoder -> painting -> human representation
 // (TransHE + DPaRF, or the SPC baseline) -> FDI -> heads. Per-frame work happens once in
 // prepare(); forward() evaluates points. The components and their forms are chosen by the
-// ModelConfig when the model is built.
+// ModelConfig when the model is built; how they run (precision, forms, kernels) is the plan's
+// (model/plan.hpp), built once per mode and device.
 
 #include <torch/torch.h>
 
@@ -13,11 +14,11 @@
 #include "core/config.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
-#include "model/forms.hpp"
 #include "model/frame_cache.hpp"
 #include "model/heads.hpp"
 #include "model/human.hpp"
 #include "model/inputs.hpp"
+#include "model/plan.hpp"
 #include "model/precision.hpp"
 #include "render/volume.hpp"
 
@@ -25,12 +26,13 @@ namespace th::model {
 
 class TransHumanImpl : public torch::nn::Module {
  public:
-  // Builds the modules and chooses each stage's form once (model/forms.hpp).
+  // Builds the modules.
   explicit TransHumanImpl(const ModelConfig& config);
 
   // The per-frame stages (model/frame_cache.hpp), in order: frame geometry and the body-distance
   // structure, encoder, folded weights (exact shortcuts), painting and the human
-  // representation, the pixel stage. Under autograd the tensors keep their history (training).
+  // representation, the pixel stage, made by the plan of the current mode: the training plan
+  // while autograd records (the tensors keep their history), the inference plan otherwise.
   // `cull_distance` is the renderer's culling distance (render.cull_distance; 0: none): the
   // frame's body-distance structure and the readout windows follow it.
   FrameCache prepare(const FrameInputs& in, double cull_distance);
@@ -57,12 +59,16 @@ class TransHumanImpl : public torch::nn::Module {
   DirectionalRaw forward_directions(const FrameCache& cache, const torch::Tensor& pts,
                                     const torch::Tensor& directions);
 
-  // Per-stage wall times are added to `profile` when set (benchmarks).
-  void set_profile(render::Profile* profile) { profile_ = profile; }
+  // Per-stage wall times are added to `profile` when set (benchmarks): the plans are built again
+  // as profiled plans.
+  void set_profile(render::Profile* profile);
   // The precision of the products (model/precision.hpp); fp32 through BLAS until set. The
-  // parameters and the per-frame state stay fp32 either way.
-  void set_products(const Products& products) { products_ = products; }
+  // parameters and the per-frame state stay fp32 either way. The plans are built again.
+  void set_products(const Products& products);
   const Products& products() const { return products_; }
+  // The plan of a mode (training: autograd records) on `device`, built on first use and kept
+  // until the products, the profile or the device change.
+  const Plan& plan(bool training, const torch::Device& device);
   const ModelConfig& config() const { return config_; }
   // The token groups of the weights (model/inputs.hpp): set when a checkpoint is loaded or when a
   // run computes them at its start; empty before either.
@@ -80,16 +86,17 @@ class TransHumanImpl : public torch::nn::Module {
   struct Trunk {
     torch::Tensor e, uv;
   };
-  Trunk trunk(const FrameCache& cache, const torch::Tensor& pts);
-  torch::Tensor color(const FrameCache& cache, const Trunk& t, const torch::Tensor& dirs);
+  Trunk trunk(const Plan& plan, const FrameCache& cache, const torch::Tensor& pts);
+  torch::Tensor color(const Plan& plan, const FrameCache& cache, const Trunk& t,
+                      const torch::Tensor& dirs);
+  // The plan that prepared `cache`.
+  const Plan& plan_of(const FrameCache& cache);
 
   ModelConfig config_;
   TokenGroups token_groups_;
   Products products_;
   render::Profile* profile_ = nullptr;
-  // The forms chosen at construction.
-  std::shared_ptr<const PixelForm> pixels_;
-  std::shared_ptr<const NetworkForm> network_;
+  std::shared_ptr<const Plan> plans_[2];  // [inference, training]
 };
 TORCH_MODULE(TransHuman);
 

@@ -8,9 +8,11 @@
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/view_attention.hpp"
 #include "model/positional_encoding.hpp"
 #include "model/shortcuts.hpp"
 #include "model/transhe.hpp"
+#include "model/transhuman.hpp"
 #include "render/volume.hpp"
 
 using namespace th;
@@ -79,8 +81,8 @@ TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v",
 TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim=1)",
           "[model][formulas]") {
   torch::manual_seed(2);
-  FDIConfig cfg;
-  FDI fdi(cfg, 384);
+  TransHuman model{ModelConfig{}};  // the paper's fusion; its plan applies FDI's layers
+  auto& fdi = model->fdi;
   const int64_t n = 64, V = 3;
   const auto s = torch::relu(torch::randn({n, V, 256})), a = torch::relu(torch::randn({n, V, 256}));
   test::PythonReference py("formulas_fdi");
@@ -97,11 +99,16 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   }
   const auto ref = py.run("fdi");
   torch::NoGradGuard ng;
-  const auto att = FDIImpl::attention(fdi->key1(s), fdi->key0(a));  // [n, query view, key view]
+  // [n, query view, key view]
+  const auto att = kernels::view_attention_weights(fdi->key1(s), fdi->key0(a));
   CHECK(max_abs(att, ref.at("attention")) < 1e-6);
   CHECK(torch::allclose(att.sum(2), torch::ones({n, V})));  // normalised over the key views
-  CHECK(max_abs(fdi->forward(s, a), ref.at("e")) < 1e-4);
-  CHECK(max_abs(fdi->forward_folded(fdi->fold(), s, a), ref.at("e")) < 1e-4);
+  const Plan plan(*model, PlanTarget{});
+  FrameCache layers, folded;
+  layers.network = LayerWeights{};
+  folded.network = fold_weights(*model->fdi, *model->heads);
+  CHECK(max_abs(plan.fuse(layers, s, a), ref.at("e")) < 1e-4);
+  CHECK(max_abs(plan.fuse(folded, s, a), ref.at("e")) < 1e-4);
 }
 
 TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black background",

@@ -6,6 +6,7 @@
 
 #include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/view_attention.hpp"
 #include "model/sampling.hpp"
 #include "model/shortcuts.hpp"
 #include "model/transhuman.hpp"
@@ -62,13 +63,13 @@ TEST_CASE("composed sampling equals grid_sample of the bilinearly upsampled map"
     const auto view = torch::arange(V).repeat({n});
     const auto taps = upsampled_bilinear_taps(flat, view, h, w, H, W);
     CHECK(taps.index.size(1) == (h == H && w == W ? 4 : 9));
-    const auto fast = weighted_gather(to_table(map), taps).view({n, V, C});
+    const auto fast = kernels::weighted_gather(to_table(map), taps).view({n, V, C});
     CHECK(max_abs(direct, fast) < 1e-12);
     // The one-pass CPU taps give the same taps as the tensor formulation.
-    const auto cpu = multi_level_taps(flat, view, {{h, w}}, {0}, H, W);
+    const auto cpu = kernels::level_taps(flat, view, {{{h, w}}, {0}, H, W});
     CHECK(torch::equal(cpu.index, taps.index));
     CHECK(torch::equal(cpu.weight, taps.weight));
-    const auto cpu32 = multi_level_taps(flat.to(torch::kFloat), view, {{h, w}}, {0}, H, W);
+    const auto cpu32 = kernels::level_taps(flat.to(torch::kFloat), view, {{{h, w}}, {0}, H, W});
     const auto ref32 = upsampled_bilinear_taps(flat.to(torch::kFloat), view, h, w, H, W);
     CHECK(torch::equal(cpu32.index, ref32.index));
     CHECK(torch::equal(cpu32.weight, ref32.weight));
@@ -80,7 +81,7 @@ TEST_CASE("weighted gather backward equals index_select autograd", "[model][samp
   const auto table = torch::randn({50, 7}, torch::kDouble).requires_grad_(true);
   Taps taps{torch::randint(0, 50, {30, 9}), torch::rand({30, 9}, torch::kDouble)};
   const auto g = torch::randn({30, 7}, torch::kDouble);
-  const auto out = weighted_gather(table, taps);
+  const auto out = kernels::weighted_gather(table, taps);
   const auto ref =
       (table.index_select(0, taps.index.flatten()).view({30, 9, 7}) * taps.weight.unsqueeze(-1))
           .sum(1);
@@ -165,7 +166,8 @@ TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradie
   auto run = [&](bool fused) {
     const auto qq = q.narrow(2, 0, 128), k = kv.narrow(2, 0, 128), u = kv.narrow(2, 128, 256),
                r = q.narrow(2, 128, 256);
-    return fused ? FDIImpl::attend(q, kv, 128) : torch::baddbmm(r, FDIImpl::attention(qq, k), u);
+    return fused ? kernels::view_attention(q, kv, 128)
+                 : torch::baddbmm(r, kernels::view_attention_weights(qq, k), u);
   };
   const auto g = torch::randn({n, V, 256}, torch::kDouble);
   const auto a = run(true), b = run(false);
@@ -231,7 +233,7 @@ TEST_CASE("readout windows sample a full-resolution map as grid_sample does",
   const auto view = torch::arange(V).repeat({n});
   const auto [taps, inside] = win.taps(flat, view, H, W);
   const auto direct = grid_sample_pixels(map, uv).reshape({-1, C});
-  const auto fast = weighted_gather(table, taps);
+  const auto fast = kernels::weighted_gather(table, taps);
   // Inside: grid_sample's value; outside: flagged, with zero weights.
   const auto x = flat.select(1, 0).clamp(0, W - 1), y = flat.select(1, 1).clamp(0, H - 1);
   const auto ix0 = x.floor().clamp(0, W - 2), iy0 = y.floor().clamp(0, H - 2);

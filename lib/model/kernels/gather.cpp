@@ -1,0 +1,249 @@
+#include "model/kernels/gather.hpp"
+
+#include <ATen/Parallel.h>
+#include <torch/torch.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "model/sampling.hpp"
+
+namespace th::model::kernels {
+namespace {
+
+// The taps of one output row: T (index, weight) pairs into a table of C channels.
+template <class T>
+struct RowTaps {
+  const int64_t* index;
+  const T* weight;
+  int64_t taps, channels;
+};
+
+// Inner loops with a runtime choice of vector width (the project builds for baseline x86-64).
+template <class T>
+inline __attribute__((always_inline)) void gather_row(T* __restrict out, const T* __restrict table,
+                                                      const RowTaps<T>& r) {
+  const int64_t C = r.channels;
+  for (int64_t c = 0; c < C; ++c) out[c] = 0;
+  for (int64_t t = 0; t < r.taps; ++t) {
+    const T w = r.weight[t];
+    if (w == T(0)) continue;
+    const T* __restrict row = table + r.index[t] * C;
+    for (int64_t c = 0; c < C; ++c) out[c] += w * row[c];
+  }
+}
+
+// Adds w * grad_out[c0, c1) into the tapped rows of grad_table.
+template <class T>
+inline __attribute__((always_inline)) void scatter_row(T* __restrict grad_table,
+                                                       const T* __restrict grad_out,
+                                                       const RowTaps<T>& r, int64_t c0,
+                                                       int64_t c1) {
+  for (int64_t t = 0; t < r.taps; ++t) {
+    const T w = r.weight[t];
+    if (w == T(0)) continue;
+    T* __restrict row = grad_table + r.index[t] * r.channels;
+    for (int64_t c = c0; c < c1; ++c) row[c] += w * grad_out[c];
+  }
+}
+
+__attribute__((target_clones("avx512f", "avx2", "default"))) void gather_row_f(
+    float* out, const float* table, const RowTaps<float>& r) {
+  gather_row<float>(out, table, r);
+}
+__attribute__((target_clones("avx512f", "avx2", "default"))) void scatter_row_f(
+    float* grad_table, const float* grad_out, const RowTaps<float>& r, int64_t c0, int64_t c1) {
+  scatter_row<float>(grad_table, grad_out, r, c0, c1);
+}
+void gather_row_any(float* out, const float* table, const RowTaps<float>& r) {
+  gather_row_f(out, table, r);
+}
+void gather_row_any(double* out, const double* table, const RowTaps<double>& r) {
+  gather_row<double>(out, table, r);
+}
+void scatter_row_any(float* gt, const float* g, const RowTaps<float>& r, int64_t c0, int64_t c1) {
+  scatter_row_f(gt, g, r, c0, c1);
+}
+void scatter_row_any(double* gt, const double* g, const RowTaps<double>& r, int64_t c0,
+                     int64_t c1) {
+  scatter_row<double>(gt, g, r, c0, c1);
+}
+
+torch::Tensor gather_forward_cpu(const torch::Tensor& table, const torch::Tensor& index,
+                                 const torch::Tensor& weight) {
+  const int64_t M = index.size(0), T_ = index.size(1), C = table.size(1);
+  auto out = torch::empty({M, C}, table.options());
+  AT_DISPATCH_FLOATING_TYPES(table.scalar_type(), "weighted_gather", [&] {
+    const scalar_t* tab = table.data_ptr<scalar_t>();
+    const int64_t* idx = index.data_ptr<int64_t>();
+    const scalar_t* w = weight.data_ptr<scalar_t>();
+    scalar_t* o = out.data_ptr<scalar_t>();
+    at::parallel_for(0, M, 64, [&](int64_t begin, int64_t end) {
+      for (int64_t m = begin; m < end; ++m)
+        gather_row_any(o + m * C, tab, RowTaps<scalar_t>{idx + m * T_, w + m * T_, T_, C});
+    });
+  });
+  return out;
+}
+
+// Adds the gradient of the table into grad_table (R, C).
+void gather_backward_cpu(const torch::Tensor& grad_out, const torch::Tensor& index,
+                         const torch::Tensor& weight, torch::Tensor& grad_table) {
+  const int64_t M = index.size(0), T_ = index.size(1), C = grad_out.size(1);
+  TORCH_CHECK(grad_table.is_contiguous() && grad_table.size(1) == C,
+              "gradient buffer must be contiguous (R, ", C, ")");
+  AT_DISPATCH_FLOATING_TYPES(grad_out.scalar_type(), "weighted_gather_backward", [&] {
+    const scalar_t* g = grad_out.data_ptr<scalar_t>();
+    const int64_t* idx = index.data_ptr<int64_t>();
+    const scalar_t* w = weight.data_ptr<scalar_t>();
+    scalar_t* gt = grad_table.data_ptr<scalar_t>();
+    // Threads split the channels, so no two threads write the same address.
+    const int64_t block =
+        std::max<int64_t>(16, (C + at::get_num_threads() - 1) / at::get_num_threads());
+    const int64_t blocks = (C + block - 1) / block;
+    at::parallel_for(0, blocks, 1, [&](int64_t b0, int64_t b1) {
+      for (int64_t b = b0; b < b1; ++b) {
+        const int64_t c0 = b * block, c1 = std::min(C, c0 + block);
+        for (int64_t m = 0; m < M; ++m)
+          scatter_row_any(gt, g + m * C, RowTaps<scalar_t>{idx + m * T_, w + m * T_, T_, C}, c0,
+                          c1);
+      }
+    });
+  });
+}
+
+struct WeightedGather : torch::autograd::Function<WeightedGather> {
+  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& table,
+                               const torch::Tensor& index, const torch::Tensor& weight,
+                               const c10::optional<torch::Tensor>& sink) {
+    ctx->save_for_backward({index, weight});
+    ctx->saved_data["rows"] = table.size(0);
+    // Not a saved variable: other chunks update the sink in place between forward and backward.
+    if (sink.has_value()) ctx->saved_data["sink"] = *sink;
+    return gather_forward_cpu(table, index, weight);
+  }
+  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
+                                                 torch::autograd::variable_list grad) {
+    const auto saved = ctx->get_saved_variables();
+    const auto g = grad[0].contiguous();
+    if (ctx->saved_data.count("sink")) {
+      auto sink = ctx->saved_data["sink"].toTensor();
+      gather_backward_cpu(g, saved[0], saved[1], sink);
+      return {torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    }
+    auto grad_table = torch::zeros({ctx->saved_data["rows"].toInt(), g.size(1)}, g.options());
+    gather_backward_cpu(g, saved[0], saved[1], grad_table);
+    return {grad_table, torch::Tensor(), torch::Tensor(), torch::Tensor()};
+  }
+};
+
+// One axis of the composed interpolation for one position x on an image axis of size S, map
+// axis of size s: the texels idx and weights w (3, or 2 when s == S); the same operations in the
+// same precision as the tensor form (upsampled_bilinear_taps, model/sampling.cpp).
+template <class T>
+int axis_taps(T x, int64_t s, int64_t S, int64_t* idx, T* w) {
+  x = x >= T(0) ? std::min(x, static_cast<T>(S - 1)) : T(0);  // NaN -> 0, never out of range
+  const T i0 = std::min(std::max(std::floor(x), T(0)), static_cast<T>(std::max<int64_t>(S - 2, 0)));
+  const T f = x - i0;
+  if (s == S) {
+    const auto j = static_cast<int64_t>(i0);
+    idx[0] = j;
+    idx[1] = std::min(j + 1, S - 1);
+    w[0] = 1 - f;
+    w[1] = f;
+    return 2;
+  }
+  const T scale =
+      static_cast<T>(S > 1 ? static_cast<double>(s - 1) / static_cast<double>(S - 1) : 0.0);
+  const T X0 = i0 * scale, X1 = (i0 + 1) * scale;
+  const T j0 = std::min(std::floor(X0), static_cast<T>(s - 1));
+  const T j1 = std::min(std::floor(X1), static_cast<T>(s - 1));
+  const T l0 = std::min(std::max(X0 - j0, T(0)), T(1));
+  const T l1 = std::min(std::max(X1 - j1, T(0)), T(1));
+  const int p0 = j0 < static_cast<T>(s - 1), p1 = j1 < static_cast<T>(s - 1);
+  const int d = static_cast<int>(j1 - j0);
+  w[0] = w[1] = w[2] = 0;
+  w[0] += (1 - f) * (1 - l0);
+  w[p0] += (1 - f) * l0;
+  w[d] += f * (1 - l1);
+  w[d + p1] += f * l1;
+  const auto j = static_cast<int64_t>(j0);
+  for (int k = 0; k < 3; ++k) idx[k] = std::min(j + k, s - 1);
+  return 3;
+}
+
+Taps level_taps_cpu(const torch::Tensor& uv, const torch::Tensor& view, const TapLayout& layout) {
+  const int64_t H = layout.height, W = layout.width;
+  int64_t T_ = 0;
+  for (const auto& [h, w] : layout.sizes) T_ += (h == H && w == W) ? 4 : 9;
+  const int64_t M = uv.size(0);
+  const auto uvc = uv.contiguous();
+  const auto vc = view.to(torch::kLong).contiguous();
+  Taps taps{torch::empty({M, T_}, vc.options()), torch::empty({M, T_}, uv.options())};
+  AT_DISPATCH_FLOATING_TYPES(uv.scalar_type(), "level_taps", [&] {
+    const scalar_t* p = uvc.data_ptr<scalar_t>();
+    const int64_t* v = vc.data_ptr<int64_t>();
+    int64_t* oi = taps.index.data_ptr<int64_t>();
+    scalar_t* ow = taps.weight.data_ptr<scalar_t>();
+    at::parallel_for(0, M, 1024, [&](int64_t begin, int64_t end) {
+      for (int64_t m = begin; m < end; ++m) {
+        int64_t* ti = oi + m * T_;
+        scalar_t* tw = ow + m * T_;
+        for (size_t l = 0; l < layout.sizes.size(); ++l) {
+          const auto [h, w] = layout.sizes[l];
+          int64_t ix[3], iy[3];
+          scalar_t wx[3], wy[3];
+          const int nx = axis_taps<scalar_t>(p[2 * m], w, W, ix, wx);
+          const int ny = axis_taps<scalar_t>(p[2 * m + 1], h, H, iy, wy);
+          const int64_t base = v[m] * h * w + layout.row_offsets[l];
+          for (int a = 0; a < ny; ++a)
+            for (int b = 0; b < nx; ++b) {
+              *ti++ = base + iy[a] * w + ix[b];
+              *tw++ = wy[a] * wx[b];
+            }
+        }
+      }
+    });
+  });
+  return taps;
+}
+
+}  // namespace
+
+Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, const TapLayout& layout) {
+  TORCH_CHECK(layout.sizes.size() == layout.row_offsets.size(), "one row offset per map");
+  TORCH_CHECK(uv.dim() == 2 && uv.size(1) == 2, "uv must be (M, 2), got ", uv.sizes());
+  TORCH_CHECK(view.dim() == 1 && view.size(0) == uv.size(0), "view must be (M), got ",
+              view.sizes());
+  for (const auto& [h, w] : layout.sizes)
+    TORCH_CHECK(h <= layout.height && w <= layout.width, "feature map (", h, ", ", w,
+                ") larger than the image (", layout.height, ", ", layout.width, ")");
+  if (uv.device().is_cpu()) return level_taps_cpu(uv, view, layout);
+  std::vector<Taps> taps;
+  for (size_t l = 0; l < layout.sizes.size(); ++l)
+    taps.push_back(upsampled_bilinear_taps(uv, view, layout.sizes[l].first, layout.sizes[l].second,
+                                           layout.height, layout.width, layout.row_offsets[l]));
+  return concat_taps(taps);
+}
+
+torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
+                              const torch::Tensor& grad_sink) {
+  TORCH_CHECK(table.dim() == 2, "table must be (R, C), got ", table.sizes());
+  TORCH_CHECK(taps.index.sizes() == taps.weight.sizes(), "taps index ", taps.index.sizes(),
+              " and weight ", taps.weight.sizes(), " differ");
+  const auto weight = taps.weight.to(table.scalar_type()).contiguous();
+  if (!table.device().is_cpu()) {
+    // gather, weight, sum (autograd through index_select)
+    const auto M = taps.index.size(0), T_ = taps.index.size(1);
+    return (table.index_select(0, taps.index.flatten()).view({M, T_, -1}) * weight.unsqueeze(-1))
+        .sum(1);
+  }
+  if (grad_sink.defined())
+    TORCH_CHECK(grad_sink.sizes() == table.sizes() && grad_sink.is_contiguous(),
+                "gradient sink must be a contiguous tensor shaped like the table ", table.sizes());
+  return WeightedGather::apply(
+      table.contiguous(), taps.index.contiguous(), weight,
+      grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt);
+}
+
+}  // namespace th::model::kernels

@@ -1,0 +1,92 @@
+// The plan (model/plan.hpp): built once per mode, device and precision, picked when a frame is
+// prepared, kept by the frame's chunks; profiling wraps it from outside.
+#include <torch/torch.h>
+
+#include <catch2/catch.hpp>
+#include <string>
+
+#include "model/frame_fixture.hpp"
+#include "model/transhuman.hpp"
+#include "render/volume.hpp"
+
+using namespace th;
+using namespace th::model;
+
+namespace {
+double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
+  return (a - b).abs().max().item<double>();
+}
+}  // namespace
+
+TEST_CASE("a plan per mode: prepare picks it once and the frame's chunks keep it",
+          "[model][plan]") {
+  const auto frame = test::synthetic_frame();
+  torch::manual_seed(5);
+  TransHuman model(test::tiny_model_config());
+  test::center_density(*model, frame);
+  // The inference plan reads readout windows on CPU; the training plan the full readouts.
+  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
+  CHECK(std::string(model->plan(true, torch::kCPU).pixel_form()) == "pixel readouts");
+  CHECK(&model->plan(false, torch::kCPU) == &model->plan(false, torch::kCPU));  // built once
+
+  FrameCache inference;
+  {
+    torch::NoGradGuard no_grad;
+    inference = model->prepare(frame.inputs, 0.1);
+  }
+  const auto training = model->prepare(frame.inputs, 0.1);
+  CHECK_FALSE(inference.training);
+  CHECK(std::holds_alternative<WindowReadouts>(inference.pixels));
+  CHECK(training.training);
+  CHECK(std::holds_alternative<PixelReadouts>(training.pixels));
+
+  // A frame keeps its plan whatever the mode of the call that evaluates it: the inference frame
+  // evaluated while autograd records reads its windows, and equals the training frame.
+  torch::manual_seed(6);
+  const auto pts = frame.inputs.vertices.narrow(0, 0, 48) + 0.03 * torch::randn({48, 3});
+  const auto dirs = torch::randn({48, 3});
+  const auto a = model->forward(inference, pts, dirs);
+  torch::Tensor b;
+  {
+    torch::NoGradGuard no_grad;
+    b = model->forward(training, pts, dirs);
+  }
+  CHECK(max_abs(a, b) < 1e-5 * (1 + b.abs().max().item<double>()));
+
+  // New products build new plans: the next prepared frame runs in them.
+  Products bf16;
+  bf16.precision = Precision::bf16;
+  model->set_products(bf16);
+  CHECK(model->plan(false, torch::kCPU).target().products.bf16());
+  CHECK(model->plan(true, torch::kCPU).target().products.bf16());
+}
+
+TEST_CASE("profiling wraps the plan: each stage's time, the method's results unchanged",
+          "[model][plan]") {
+  const auto frame = test::synthetic_frame();
+  torch::manual_seed(7);
+  TransHuman model(test::tiny_model_config());
+  torch::NoGradGuard no_grad;
+  const auto pts = frame.inputs.vertices.narrow(0, 0, 32) + 0.03 * torch::randn({32, 3});
+  const auto dirs = torch::randn({32, 3});
+  const auto plain = model->forward(model->prepare(frame.inputs, 0.1), pts, dirs);
+
+  render::Profile profile;
+  model->set_profile(&profile);
+  const auto cache = model->prepare(frame.inputs, 0.1);
+  const auto timed = model->forward(cache, pts, dirs);
+  model->set_profile(nullptr);
+  CHECK(torch::equal(plain, timed));
+  for (const char* stage :
+       {"encoder", "painting", "transhe", "readouts", "dparf", "sampling", "fdi", "heads"}) {
+    INFO(stage);
+    CHECK(profile.seconds.count(stage) == 1);
+    CHECK(profile.seconds[stage] >= 0);
+  }
+  CHECK(profile.open.empty());  // every timer closed
+
+  // Without a profile, the plans are plain again: nothing more is recorded.
+  const auto before = profile.seconds;
+  model->forward(cache, pts, dirs);
+  CHECK(profile.seconds == before);
+}
