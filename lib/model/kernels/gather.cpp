@@ -22,7 +22,7 @@ struct RowTaps {
 // Inner loops with a runtime choice of vector width (the project builds for baseline x86-64).
 template <class T>
 inline __attribute__((always_inline)) void gather_row(T* __restrict out, const T* __restrict table,
-                                                      const RowTaps<T>& r) {
+                                                      RowTaps<T> r) {
   const int64_t C = r.channels;
   for (int64_t c = 0; c < C; ++c) out[c] = 0;
   for (int64_t t = 0; t < r.taps; ++t) {
@@ -36,9 +36,8 @@ inline __attribute__((always_inline)) void gather_row(T* __restrict out, const T
 // Adds w * grad_out[c0, c1) into the tapped rows of grad_table.
 template <class T>
 inline __attribute__((always_inline)) void scatter_row(T* __restrict grad_table,
-                                                       const T* __restrict grad_out,
-                                                       const RowTaps<T>& r, int64_t c0,
-                                                       int64_t c1) {
+                                                       const T* __restrict grad_out, RowTaps<T> r,
+                                                       int64_t c0, int64_t c1) {
   for (int64_t t = 0; t < r.taps; ++t) {
     const T w = r.weight[t];
     if (w == T(0)) continue;
@@ -47,25 +46,25 @@ inline __attribute__((always_inline)) void scatter_row(T* __restrict grad_table,
   }
 }
 
-__attribute__((target_clones("avx512f", "avx2", "default"))) void gather_row_f(
-    float* out, const float* table, const RowTaps<float>& r) {
+__attribute__((target_clones("avx512f", "avx2", "default"))) void gather_row_f(float* out,
+                                                                               const float* table,
+                                                                               RowTaps<float> r) {
   gather_row<float>(out, table, r);
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void scatter_row_f(
-    float* grad_table, const float* grad_out, const RowTaps<float>& r, int64_t c0, int64_t c1) {
+    float* grad_table, const float* grad_out, RowTaps<float> r, int64_t c0, int64_t c1) {
   scatter_row<float>(grad_table, grad_out, r, c0, c1);
 }
-void gather_row_any(float* out, const float* table, const RowTaps<float>& r) {
+void gather_row_any(float* out, const float* table, RowTaps<float> r) {
   gather_row_f(out, table, r);
 }
-void gather_row_any(double* out, const double* table, const RowTaps<double>& r) {
+void gather_row_any(double* out, const double* table, RowTaps<double> r) {
   gather_row<double>(out, table, r);
 }
-void scatter_row_any(float* gt, const float* g, const RowTaps<float>& r, int64_t c0, int64_t c1) {
+void scatter_row_any(float* gt, const float* g, RowTaps<float> r, int64_t c0, int64_t c1) {
   scatter_row_f(gt, g, r, c0, c1);
 }
-void scatter_row_any(double* gt, const double* g, const RowTaps<double>& r, int64_t c0,
-                     int64_t c1) {
+void scatter_row_any(double* gt, const double* g, RowTaps<double> r, int64_t c0, int64_t c1) {
   scatter_row<double>(gt, g, r, c0, c1);
 }
 

@@ -68,8 +68,7 @@ void squared_distances_any(const double (&p)[3], const double* axes, int64_t nt,
 // index), softmax(-d / T) weights, local coordinates and the arguments x * f + phase of their
 // encoding.
 template <class T>
-void nearest_fields_rows(const T* xs, const Fields<T>& f, const Outputs<T>& out, int64_t begin,
-                         int64_t end) {
+void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin, int64_t end) {
   const int64_t nt = f.nt, nk = f.nk, nf2 = f.nf2;
   std::vector<T> best_d(nk), dist2(nt);
   std::vector<int64_t> best_i(nk);

@@ -55,8 +55,8 @@ inline __attribute__((always_inline)) void axpy(T* __restrict y, T a, const T* _
 // Forward of points [b, e): out (N, V, C) holds r on entry and the output on return; att
 // (N, V, V) receives the attention weights.
 template <class T>
-inline __attribute__((always_inline)) void attend_rows(const Operands<T>& x, T* out, T* att,
-                                                       int64_t b, int64_t e) {
+inline __attribute__((always_inline)) void attend_rows(Operands<T> x, T* out, T* att, int64_t b,
+                                                       int64_t e) {
   const int64_t V = x.V, d = x.d, C = x.C, W = x.width();
   for (int64_t n = b; n < e; ++n) {
     T* a = att + n * V * V;
@@ -74,9 +74,8 @@ inline __attribute__((always_inline)) void attend_rows(const Operands<T>& x, T* 
 
 // Backward of points [b, e).
 template <class T>
-inline __attribute__((always_inline)) void attend_rows_backward(const Operands<T>& x,
-                                                                const Gradients<T>& g, int64_t b,
-                                                                int64_t e) {
+inline __attribute__((always_inline)) void attend_rows_backward(Operands<T> x, Gradients<T> g,
+                                                                int64_t b, int64_t e) {
   const int64_t V = x.V, d = x.d, C = x.C, W = x.width();
   T* ga = g.scratch;
   for (int64_t n = b; n < e; ++n) {
@@ -100,25 +99,23 @@ inline __attribute__((always_inline)) void attend_rows_backward(const Operands<T
 
 // float: one clone per vector width, chosen at run time (the project builds for baseline x86-64).
 __attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_f(
-    const Operands<float>& x, float* out, float* att, int64_t b, int64_t e) {
+    Operands<float> x, float* out, float* att, int64_t b, int64_t e) {
   attend_rows<float>(x, out, att, b, e);
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void attend_rows_backward_f(
-    const Operands<float>& x, const Gradients<float>& g, int64_t b, int64_t e) {
+    Operands<float> x, Gradients<float> g, int64_t b, int64_t e) {
   attend_rows_backward<float>(x, g, b, e);
 }
-void attend_rows_any(const Operands<float>& x, float* out, float* att, int64_t b, int64_t e) {
+void attend_rows_any(Operands<float> x, float* out, float* att, int64_t b, int64_t e) {
   attend_rows_f(x, out, att, b, e);
 }
-void attend_rows_any(const Operands<double>& x, double* out, double* att, int64_t b, int64_t e) {
+void attend_rows_any(Operands<double> x, double* out, double* att, int64_t b, int64_t e) {
   attend_rows<double>(x, out, att, b, e);
 }
-void attend_rows_backward_any(const Operands<float>& x, const Gradients<float>& g, int64_t b,
-                              int64_t e) {
+void attend_rows_backward_any(Operands<float> x, Gradients<float> g, int64_t b, int64_t e) {
   attend_rows_backward_f(x, g, b, e);
 }
-void attend_rows_backward_any(const Operands<double>& x, const Gradients<double>& g, int64_t b,
-                              int64_t e) {
+void attend_rows_backward_any(Operands<double> x, Gradients<double> g, int64_t b, int64_t e) {
   attend_rows_backward<double>(x, g, b, e);
 }
 
