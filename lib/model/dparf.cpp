@@ -118,8 +118,8 @@ FieldQuery DPaRF::query_tensors(const TokenFrames& frames, const torch::Tensor& 
   TORCH_CHECK(O.size(0) >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ",
               O.size(0));
   FieldQuery q;
-  // Candidate selection on |x|^2 - 2 x.O + |O|^2; exact distances of the chosen fields below.
-  const auto d2 = torch::addmm((O * O).sum(1).unsqueeze(0), xs, O.t(), 1, -2);
+  // Exact squared distances, for the choice only (no graph).
+  const auto d2 = (xs.detach().unsqueeze(1) - O.detach().unsqueeze(0)).pow(2).sum(2);
   q.index = std::get<1>(d2.topk(nk, 1, /*largest=*/false, /*sorted=*/true));
   const auto n = xs.size(0);
   const auto diff = xs.unsqueeze(1) - O.index_select(0, q.index.flatten()).view({n, nk, 3});

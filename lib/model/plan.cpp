@@ -35,7 +35,7 @@ Plan::Plan(TransHumanImpl& model, const PlanTarget& target) : model_(model), tar
   if (!config.fdi.appearance)
     pixel_form_ = PixelForm::none;
   else if (config.exact_shortcuts)
-    pixel_form_ = config.readout_windows && !target.training && target.device.is_cpu()
+    pixel_form_ = config.readout_windows && !target.training && target.cpu_kernels
                       ? PixelForm::windows
                       : PixelForm::readouts;
   else

@@ -3,7 +3,8 @@
 // network is the plain pass (model/network.hpp); a plan computes the same function from a
 // per-frame state (model/frame_cache.hpp) made once per frame, with the exact shortcuts of
 // METHOD 9 where model.exact_shortcuts asks for them, the products in the precision it was built
-// for, and the kernels of model/kernels/ where its tensors live on the CPU.
+// for, and the kernels of model/kernels/ where its tensors live on the CPU (their LibTorch forms
+// elsewhere).
 //
 // A plan is built once for a precision (its Products), a device and a mode (training: autograd
 // records; inference: it does not), and everything it decides is decided then: which form each
@@ -37,6 +38,8 @@ struct PlanTarget {
   Products products;                   // the precision of the per-point products
   torch::Device device = torch::kCPU;  // where the frame's tensors live
   bool training = false;               // autograd records (training) or not (inference)
+  // The CPU kernels of model/kernels/ or their LibTorch forms (model/kernels/forms.hpp).
+  bool cpu_kernels = true;
 };
 
 class Plan {

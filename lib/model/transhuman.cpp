@@ -8,6 +8,7 @@
 
 #include "core/error.hpp"
 #include "geometry/camera.hpp"
+#include "model/kernels/forms.hpp"
 #include "model/positional_encoding.hpp"
 #include "model/pretrained.hpp"
 #include "render/body_distance.hpp"
@@ -41,8 +42,9 @@ void TransHumanImpl::set_products(const Products& products) {
 
 const Plan& TransHumanImpl::plan(bool training, const torch::Device& device) {
   auto& plan = plans_[training ? 1 : 0];
-  if (!plan || plan->target().device != device) {
-    const PlanTarget target{products_, device, training};
+  const bool cpu_kernels = kernels::cpu_kernels(device);
+  if (!plan || plan->target().device != device || plan->target().cpu_kernels != cpu_kernels) {
+    const PlanTarget target{products_, device, training, cpu_kernels};
     if (profile_)
       plan = std::make_shared<const ProfiledPlan>(*this, target, profile_);
     else
@@ -168,7 +170,7 @@ namespace {
 
 // The frame's tensors that carry a gradient, as leaves of a graph of their own (the same
 // tensors, in the same order, as the inputs of CheckpointedChunks::forward); tables read by
-// weighted_gather get a gradient sink on CPU.
+// weighted_gather get a gradient sink where the CPU kernels run.
 struct LeafFrame {
   FrameCache cache;
   std::vector<torch::Tensor> leaves, sinks;
@@ -179,7 +181,7 @@ struct LeafFrame {
       t = t.detach().requires_grad_(true);
       leaves.push_back(t);
       sinks.emplace_back();
-      if (sink && t.device().is_cpu()) sinks.back() = *sink = torch::zeros_like(t);
+      if (sink && kernels::cpu_kernels(t.device())) sinks.back() = *sink = torch::zeros_like(t);
     });
   }
   // The gradients of the leaves (sinks added), one per leaf.

@@ -19,6 +19,11 @@
 
 namespace th::test {
 
+// The largest absolute difference of two tensors of one shape.
+inline double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
+  return (a - b).abs().max().item<double>();
+}
+
 inline torch::Tensor rotation_y(double a) {
   return torch::tensor(
              {std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)},

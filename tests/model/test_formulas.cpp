@@ -18,11 +18,7 @@
 using namespace th;
 using namespace th::model;
 
-namespace {
-double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
-  return (a - b).abs().max().item<double>();
-}
-}  // namespace
+using test::max_abs;
 
 TEST_CASE("positional encodings: layout and float32 values match numpy", "[model][formulas]") {
   torch::manual_seed(0);

@@ -1,22 +1,20 @@
 // The plan (model/plan.hpp): built once per mode, device and precision, picked when a frame is
-// prepared, kept by the frame's chunks; profiling wraps it from outside.
+// prepared, kept by the frame's chunks; profiling wraps it from outside; the guard that puts the
+// kernels' LibTorch forms in place of the CPU kernels.
 #include <torch/torch.h>
 
 #include <catch2/catch.hpp>
 #include <string>
 
 #include "model/frame_fixture.hpp"
+#include "model/kernels/forms.hpp"
 #include "model/transhuman.hpp"
 #include "render/volume.hpp"
 
 using namespace th;
 using namespace th::model;
 
-namespace {
-double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
-  return (a - b).abs().max().item<double>();
-}
-}  // namespace
+using test::max_abs;
 
 TEST_CASE("a plan per mode: prepare picks it once and the frame's chunks keep it",
           "[model][plan]") {
@@ -89,4 +87,28 @@ TEST_CASE("profiling wraps the plan: each stage's time, the method's results unc
   const auto before = profile.seconds;
   model->forward(cache, pts, dirs);
   CHECK(profile.seconds == before);
+}
+
+TEST_CASE("LibTorch forms: the CPU kernels step aside while the guard lives, and plans follow",
+          "[model][plan]") {
+  torch::manual_seed(5);
+  TransHuman model(test::tiny_model_config());
+  CHECK(kernels::cpu_kernels(torch::kCPU));
+  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
+  {
+    kernels::LibTorchForms outer;
+    CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));
+    {
+      kernels::LibTorchForms inner;
+      CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));
+    }
+    CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));  // the inner guard restores the outer's
+    // The plan built before the guard is not reused: readout windows are a CPU kernel's form.
+    CHECK_FALSE(model->plan(false, torch::kCPU).target().cpu_kernels);
+    CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "pixel readouts");
+  }
+  CHECK(kernels::cpu_kernels(torch::kCPU));
+  CHECK(model->plan(false, torch::kCPU).target().cpu_kernels);
+  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
+  CHECK_FALSE(kernels::cpu_kernels(torch::Device(torch::kCUDA, 0)));  // no kernel of ours there
 }

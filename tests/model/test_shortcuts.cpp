@@ -16,11 +16,9 @@ using namespace th::model;
 
 namespace F = torch::nn::functional;
 
-namespace {
+using test::max_abs;
 
-double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
-  return (a - b).abs().max().item<double>();
-}
+namespace {
 
 torch::Tensor random_uv(int64_t n, int64_t V, int64_t W, int64_t H) {
   // Inside the image, on its border, and outside it (border padding).

@@ -5,6 +5,8 @@
 
 #include <cmath>
 
+#include "model/kernels/forms.hpp"
+
 namespace th::model::kernels {
 
 torch::Tensor sincos_arguments(const torch::Tensor& x, const torch::Tensor& freqs,
@@ -13,7 +15,13 @@ torch::Tensor sincos_arguments(const torch::Tensor& x, const torch::Tensor& freq
   const int64_t n = x.size(0), dims = x.size(1), nf = freqs.numel();
   const auto f = freqs.view({1, -1, 1}), p = phases.view({1, -1, 1});
   if (!fused) return x.unsqueeze(1) * f + p;
-  if (!x.device().is_cpu()) return torch::addcmul(p, x.unsqueeze(1), f);  // fused on GPUs
+  if (!cpu_kernels(x.device())) {
+    // As the plain pass: float64 holds the product of two floats exactly, the sum is rounded
+    // there and then to the input's type (the fma's one rounding but for rare double-rounding
+    // ties; the same on every device).
+    const auto d = torch::kDouble;
+    return torch::addcmul(p.to(d), x.to(d).unsqueeze(1), f.to(d)).to(x.scalar_type());
+  }
   // IEEE fma, whatever the CPU (no gradient: the encoded points carry none in this model)
   auto args = torch::empty({n, nf, dims}, x.options());
   const auto xc = x.contiguous();

@@ -1,7 +1,8 @@
 #pragma once
 // The arguments x f + phase of the sine-cosine encodings (METHOD 3.2, 3.3), the one part of the
 // encoding whose rounding the reference fixes: fused rounds once, as torch.addcmul does with a
-// fused multiply-add [parity]. On CPU an fma loop (the same on every processor); elsewhere addcmul.
+// fused multiply-add [parity]. The CPU kernel is an fma loop (the same on every processor), the
+// LibTorch form a float64 addcmul rounded to the input's type (model/kernels/forms.hpp).
 
 #include <torch/types.h>
 

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "model/kernels/forms.hpp"
 #include "model/sampling.hpp"
 
 namespace th::model::kernels {
@@ -217,7 +218,7 @@ Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, const TapLay
   for (const auto& [h, w] : layout.sizes)
     TORCH_CHECK(h <= layout.height && w <= layout.width, "feature map (", h, ", ", w,
                 ") larger than the image (", layout.height, ", ", layout.width, ")");
-  if (uv.device().is_cpu()) return level_taps_cpu(uv, view, layout);
+  if (cpu_kernels(uv.device())) return level_taps_cpu(uv, view, layout);
   std::vector<Taps> taps;
   for (size_t l = 0; l < layout.sizes.size(); ++l)
     taps.push_back(upsampled_bilinear_taps(uv, view, layout.sizes[l].first, layout.sizes[l].second,
@@ -231,7 +232,7 @@ torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
   TORCH_CHECK(taps.index.sizes() == taps.weight.sizes(), "taps index ", taps.index.sizes(),
               " and weight ", taps.weight.sizes(), " differ");
   const auto weight = taps.weight.to(table.scalar_type()).contiguous();
-  if (!table.device().is_cpu()) {
+  if (!cpu_kernels(table.device())) {
     // gather, weight, sum (autograd through index_select)
     const auto M = taps.index.size(0), T_ = taps.index.size(1);
     return (table.index_select(0, taps.index.flatten()).view({M, T_, -1}) * weight.unsqueeze(-1))

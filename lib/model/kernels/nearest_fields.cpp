@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "model/kernels/encoding.hpp"
+#include "model/kernels/forms.hpp"
 #include "model/positional_encoding.hpp"
 
 namespace th::model::kernels {
@@ -120,13 +121,16 @@ void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin
 }
 
 // The same query in LibTorch operations (other devices, gradients with respect to the points):
-// candidates on |x|^2 - 2 x.O + |O|^2, exact distances of the chosen fields.
+// exact squared distances to every origin, as the plain pass computes them. (Not the expanded
+// |x|^2 - 2 x.O + |O|^2: its rounding depends on the product's blocking, so a near tie could pick
+// other fields in a training recomputation than in the pass it recomputes.)
 NearestFields nearest_fields_tensors(const torch::Tensor& xs, const torch::Tensor& O,
                                      const torch::Tensor& rotations,
                                      const FieldQueryOptions& options) {
   const int64_t n = xs.size(0), nk = options.nk;
   NearestFields q;
-  const auto d2 = torch::addmm((O * O).sum(1).unsqueeze(0), xs, O.t(), 1, -2);
+  // (N, Nt), for the choice only: no graph
+  const auto d2 = (xs.detach().unsqueeze(1) - O.detach().unsqueeze(0)).pow(2).sum(2);
   q.index = std::get<1>(d2.topk(nk, 1, /*largest=*/false, /*sorted=*/true));
   const auto flat = q.index.flatten();
   const auto diff = xs.unsqueeze(1) - O.index_select(0, flat).view({n, nk, 3});
@@ -149,7 +153,7 @@ NearestFields nearest_fields(const torch::Tensor& xs, const torch::Tensor& origi
   TORCH_CHECK(xs.dim() == 2 && xs.size(1) == 3, "DPaRF points must be (N, 3), got ", xs.sizes());
   const int64_t nk = options.nk, nt = origins.size(0), n = xs.size(0);
   TORCH_CHECK(nt >= nk, "DPaRF needs at least nk = ", nk, " tokens, the frame has ", nt);
-  if (!xs.device().is_cpu() || xs.requires_grad())
+  if (!cpu_kernels(xs.device()) || xs.requires_grad())
     return nearest_fields_tensors(xs, origins, rotations, options);
   const int64_t nf2 = 2 * options.pe_freqs;
   const auto x = xs.contiguous();
@@ -190,7 +194,7 @@ torch::Tensor weighted_codes(NearestFields& fields) {
   TORCH_CHECK(fields.local.defined() && fields.args.defined(),
               "weighted_codes: the query has no local coordinates");
   const auto& x = fields.local;
-  if (!x.device().is_cpu() || x.requires_grad()) {
+  if (!cpu_kernels(x.device()) || x.requires_grad()) {
     const auto g = torch::cat({x, torch::sin(fields.args).flatten(2)}, 2);  // (N, Nk, G)
     return torch::bmm(fields.weight.unsqueeze(1), g).squeeze(1);
   }

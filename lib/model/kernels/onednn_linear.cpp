@@ -3,6 +3,8 @@
 #include <torch/csrc/autograd/custom_function.h>
 #include <torch/torch.h>
 
+#include "model/kernels/forms.hpp"
+
 namespace th::model::kernels {
 namespace {
 
@@ -39,7 +41,7 @@ struct OneDnnLinear : torch::autograd::Function<OneDnnLinear> {
 
 torch::Tensor onednn_linear(const torch::Tensor& x2, const torch::Tensor& w,
                             const torch::Tensor& b) {
-  if (!x2.device().is_cpu()) return torch::nn::functional::linear(x2, w, b);
+  if (!cpu_kernels(x2.device())) return torch::nn::functional::linear(x2, w, b);
   const bool grad = torch::GradMode::is_enabled() &&
                     (x2.requires_grad() || w.requires_grad() || (b.defined() && b.requires_grad()));
   if (!grad) return onednn_product(x2, w, b);

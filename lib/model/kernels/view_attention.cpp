@@ -7,6 +7,8 @@
 #include <limits>
 #include <vector>
 
+#include "model/kernels/forms.hpp"
+
 namespace th::model::kernels {
 namespace {
 
@@ -185,7 +187,7 @@ torch::Tensor view_attention(const torch::Tensor& qr, const torch::Tensor& kv, i
   TORCH_CHECK(qr.dim() == 3 && qr.sizes() == kv.sizes(),
               "view attention: qr and kv must be (N, V, d + C), got ", qr.sizes(), " and ",
               kv.sizes());
-  if (qr.device().is_cpu()) return ViewAttention::apply(qr, kv, d);
+  if (cpu_kernels(qr.device())) return ViewAttention::apply(qr, kv, d);
   const int64_t C = qr.size(2) - d;
   return torch::baddbmm(qr.narrow(2, d, C),
                         view_attention_weights(qr.narrow(2, 0, d), kv.narrow(2, 0, d)),
