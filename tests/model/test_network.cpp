@@ -204,9 +204,9 @@ TEST_CASE("the plain network pass equals the model with its METHOD 9 shortcuts, 
 // windows, no CPU kernel, no gradient sink), the shortcuts and the direct computation alike.
 // Gradients jump at ReLU's kink, so a unit whose pre-activation lies within rounding of zero can
 // take the other side in other arithmetic and move one channel's gradient by far more than
-// rounding (seen once here: nt_100, direct, one row of fdi.fc_2). Such a point set is measure
-// zero: where the gradients differ, the comparison is made again at points moved by 1 mm, and
-// there they must agree; a wrong formula differs at both.
+// rounding (with these rows' data: nt_100, direct, one row of fdi.fc_2). Such a point set is
+// measure zero: where the gradients differ, the comparison is made again at points moved by 1 mm,
+// and there they must agree; a wrong formula differs at both.
 TEST_CASE("the plain network pass equals the model in its LibTorch forms, in every ablation",
           "[model][network]") {
   for (const auto& row : rows()) {
