@@ -41,11 +41,12 @@ struct Outputs {
 // Squared distances of one point to all nt origins, given per axis: a loop the compiler
 // vectorises, with the same operations per origin as a scalar loop (the float clones enable no
 // FMA, so no rounding changes).
+// The point comes as three values, not an array by reference: its address would escape to the
+// out-of-line clones and every store through an output pointer would reload it.
 template <class T>
-inline __attribute__((always_inline)) void squared_distances(const T (&p)[3],
+inline __attribute__((always_inline)) void squared_distances(T x, T y, T z,
                                                              const T* __restrict axes, int64_t nt,
                                                              T* __restrict d2) {
-  const T x = p[0], y = p[1], z = p[2];
   const T* __restrict ox = axes;
   const T* __restrict oy = axes + nt;
   const T* __restrict oz = axes + 2 * nt;
@@ -55,14 +56,15 @@ inline __attribute__((always_inline)) void squared_distances(const T (&p)[3],
   }
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void squared_distances_f(
-    const float (&p)[3], const float* axes, int64_t nt, float* d2) {
-  squared_distances<float>(p, axes, nt, d2);
+    float x, float y, float z, const float* axes, int64_t nt, float* d2) {
+  squared_distances<float>(x, y, z, axes, nt, d2);
 }
-void squared_distances_any(const float (&p)[3], const float* axes, int64_t nt, float* d2) {
-  squared_distances_f(p, axes, nt, d2);
+void squared_distances_any(float x, float y, float z, const float* axes, int64_t nt, float* d2) {
+  squared_distances_f(x, y, z, axes, nt, d2);
 }
-void squared_distances_any(const double (&p)[3], const double* axes, int64_t nt, double* d2) {
-  squared_distances<double>(p, axes, nt, d2);
+void squared_distances_any(double x, double y, double z, const double* axes, int64_t nt,
+                           double* d2) {
+  squared_distances<double>(x, y, z, axes, nt, d2);
 }
 
 // Points [begin, end): the nk nearest origins (exact squared distances, nearest first, ties by
@@ -74,8 +76,8 @@ void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin
   std::vector<T> best_d(nk), dist2(nt);
   std::vector<int64_t> best_i(nk);
   for (int64_t n = begin; n < end; ++n) {
-    const T p[3] = {xs[3 * n], xs[3 * n + 1], xs[3 * n + 2]};
-    squared_distances_any(p, f.axes, nt, dist2.data());
+    const T x = xs[3 * n], y = xs[3 * n + 1], z = xs[3 * n + 2];
+    squared_distances_any(x, y, z, f.axes, nt, dist2.data());
     int64_t count = 0;
     for (int64_t t = 0; t < nt; ++t) {
       const T d2 = dist2[t];
@@ -96,7 +98,7 @@ void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin
       const int64_t t = best_i[k];
       idx[k] = t;
       const T* o = f.origins + 3 * t;
-      const T d[3] = {p[0] - o[0], p[1] - o[1], p[2] - o[2]};
+      const T d[3] = {x - o[0], y - o[1], z - o[2]};
       w[k] = -std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / f.temperature;
       max_logit = std::max(max_logit, w[k]);
       if (!out.local) continue;
