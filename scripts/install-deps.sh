@@ -11,6 +11,7 @@ packages=(
   clang-format-14  # the formatting check (scripts/check-format.sh)
   chromium libjs-three  # the HTML report: three.js for its 3D viewer, Chromium for its test
   libcpp-httplib-dev  # transhuman-view serves its page over HTTP
+  libdnnl-dev  # oneDNN's headers: the fp32 products call the library LibTorch links directly
   nlohmann-json3-dev  # every JSON file and answer is read and written with nlohmann::json
   python3 python3-numpy python3-scipy python3-torch python3-torchvision python3-skimage python3-opencv
 )

@@ -6,12 +6,14 @@
 #include <fstream>
 #include <set>
 #include <sstream>
+#include <tuple>
 
 #include "core/config.hpp"
 #include "core/config_io.hpp"
 #include "core/error.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
+#include "model/kernels/onednn_linear.hpp"
 #include "model/precision.hpp"
 
 using th::model::FrameAutocast;
@@ -138,6 +140,36 @@ TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradi
     (yn * g.to(torch::kFloat)).sum().backward();
     CHECK(max_rel(wn.grad(), wd.grad()) < 1e-6);
     CHECK(max_rel(xn.grad(), xd.grad()) < 1e-6);
+  }
+}
+
+TEST_CASE("the direct oneDNN product equals LibTorch's mkldnn_linear to the bit", "[precision]") {
+  if (!at::hasMKLDNN()) {
+    WARN("this LibTorch has no oneDNN: nothing to compare");
+    return;
+  }
+  if (!th::model::kernels::onednn_direct())
+    WARN("this build has no oneDNN 2 headers: onednn_linear is mkldnn_linear itself");
+  torch::manual_seed(1);
+  torch::NoGradGuard no_grad;
+  // The model's shapes (rows: points x views, a chunk's remainder), a bias-free product, a
+  // non-contiguous input, and no rows at all.
+  for (const auto& [rows, in, out] : std::vector<std::tuple<int64_t, int64_t, int64_t>>{
+           {12288, 256, 384}, {2777, 256, 128}, {4096, 63, 256}, {5, 27, 1}, {0, 256, 256}}) {
+    for (const bool bias : {true, false}) {
+      CAPTURE(rows, in, out, bias);
+      const auto x = torch::randn({rows, in}), w = torch::randn({out, in}) * 0.1;
+      const auto b = bias ? torch::randn({out}) : torch::Tensor();
+      const c10::optional<torch::Tensor> ob = bias ? c10::optional<torch::Tensor>(b) : c10::nullopt;
+      const auto y = th::model::kernels::onednn_linear(x, w, b);
+      REQUIRE(y.sizes() == torch::IntArrayRef{rows, out});
+      if (rows == 0) continue;
+      const auto ref = at::mkldnn_linear(x.to_mkldnn(), w, ob).to_dense();
+      CHECK(torch::equal(y, ref));
+      const auto xt = torch::randn({in, rows}).t();  // strided rows
+      CHECK(torch::equal(th::model::kernels::onednn_linear(xt, w, b),
+                         at::mkldnn_linear(xt.contiguous().to_mkldnn(), w, ob).to_dense()));
+    }
   }
 }
 

@@ -1,7 +1,11 @@
 #pragma once
-// The fp32 product y = x w^T + b through oneDNN (a reorder in, the product, a reorder out), with
-// its own backward (oneDNN's derivative wants oneDNN-layout gradients): dx = g w through oneDNN,
-// dw = g^T x and db = sum g through BLAS. On CPU only; other devices take LibTorch's linear.
+// The fp32 product y = x w^T + b through oneDNN's inner-product primitive, with its own backward
+// (oneDNN's derivative wants oneDNN-layout gradients): dx = g w through oneDNN, dw = g^T x and
+// db = sum g through BLAS. On CPU only; other devices take LibTorch's linear.
+//
+// Built against oneDNN 2.x's headers (Debian's libdnnl-dev, the library LibTorch links), the
+// primitive runs on the tensors' own memory; without them, through LibTorch's mkldnn_linear,
+// which copies x into a oneDNN tensor and the result out of one. The products are the same.
 
 #include <torch/types.h>
 
@@ -11,5 +15,8 @@ namespace th::model::kernels {
 // where autograd records.
 torch::Tensor onednn_linear(const torch::Tensor& x2, const torch::Tensor& w,
                             const torch::Tensor& b);
+
+// Whether onednn_linear calls oneDNN directly (this build has oneDNN's headers).
+bool onednn_direct();
 
 }  // namespace th::model::kernels
