@@ -3,9 +3,10 @@
 // (oneDNN's derivative wants oneDNN-layout gradients): dx = g w through oneDNN, dw = g^T x and
 // db = sum g through BLAS. On CPU only; other devices take LibTorch's linear.
 //
-// Built against oneDNN 2.x's headers (Debian's libdnnl-dev, the library LibTorch links), the
-// primitive runs on the tensors' own memory; without them, through LibTorch's mkldnn_linear,
-// which copies x into a oneDNN tensor and the result out of one. The products are the same.
+// Built against oneDNN 2.x's headers (Debian 12's libdnnl-dev) where LibTorch links that same
+// shared library, the primitive runs on the tensors' own memory; otherwise the product goes
+// through LibTorch's mkldnn_linear, which copies x into a oneDNN tensor and the result out of one.
+// The products are the same (lib/model/CMakeLists.txt decides).
 
 #include <torch/types.h>
 
