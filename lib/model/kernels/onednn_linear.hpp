@@ -6,7 +6,7 @@
 // Built against oneDNN 2.x's headers (Debian 12's libdnnl-dev) where LibTorch links that same
 // shared library, the primitive runs on the tensors' own memory; otherwise the product goes
 // through LibTorch's mkldnn_linear, which copies x into a oneDNN tensor and the result out of one.
-// The products are the same (lib/model/CMakeLists.txt decides).
+// The products are the same to the bit; lib/model/CMakeLists.txt decides which path is built.
 
 #include <torch/types.h>
 
@@ -17,7 +17,8 @@ namespace th::model::kernels {
 torch::Tensor onednn_linear(const torch::Tensor& x2, const torch::Tensor& w,
                             const torch::Tensor& b);
 
-// Whether onednn_linear calls oneDNN directly (this build has oneDNN's headers).
+// Whether onednn_linear calls oneDNN directly (built with oneDNN 2's headers, LibTorch linking the
+// same library); false: it calls mkldnn_linear.
 bool onednn_direct();
 
 }  // namespace th::model::kernels
