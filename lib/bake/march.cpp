@@ -109,6 +109,13 @@ bool near_far(const double o[3], const double d_in[3], const std::array<double, 
 BakedImages render_baked(const BakedFrame& frame, const torch::Tensor& K, const torch::Tensor& R,
                          const torch::Tensor& T, int width, int height,
                          const MarchOptions& options) {
+  return *render_baked(frame, K, R, T, width, height, options, {});
+}
+
+std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Tensor& K,
+                                        const torch::Tensor& R, const torch::Tensor& T, int width,
+                                        int height, const MarchOptions& options,
+                                        const std::function<bool()>& cancelled) {
   TORCH_CHECK(options.samples >= 2, "render_baked: at least 2 samples per ray, got ",
               options.samples);
   TORCH_CHECK(width > 0 && height > 0, "render_baked: empty image ", width, "x", height);
@@ -133,7 +140,12 @@ BakedImages render_baked(const BakedFrame& frame, const torch::Tensor& K, const 
   const double tau = options.termination;
   std::atomic<int64_t> rays{0}, samples{0}, occupied{0}, terminated{0};
 
-  at::parallel_for(0, height, 1, [&](int64_t y0, int64_t y1) {
+  // Bands of rows of about kBandSamples samples per thread (a ray's samples at most), so that a
+  // band takes milliseconds whatever the image size and samples.
+  constexpr int64_t kBandSamples = int64_t{1} << 18;
+  const int64_t band =
+      std::max<int64_t>(1, kBandSamples / (int64_t(width) * S)) * at::get_num_threads();
+  const auto march_rows = [&](int64_t y0, int64_t y1) {
     int64_t n_rays = 0, n_samples = 0, n_occupied = 0, n_terminated = 0;
     for (int64_t y = y0; y < y1; ++y)
       for (int64_t x = 0; x < width; ++x) {
@@ -186,7 +198,11 @@ BakedImages render_baked(const BakedFrame& frame, const torch::Tensor& K, const 
     samples += n_samples;
     occupied += n_occupied;
     terminated += n_terminated;
-  });
+  };
+  for (int64_t y = 0; y < height; y += band) {
+    if (cancelled && cancelled()) return std::nullopt;
+    at::parallel_for(y, std::min<int64_t>(height, y + band), 1, march_rows);
+  }
   out.stats = {rays.load(), samples.load(), occupied.load(), terminated.load()};
   return out;
 }

@@ -3,11 +3,14 @@
 // and its samples exactly as the exact renderer makes them (METHOD 2.2, 4), but each sample's
 // density and colour interpolated trilinearly from the grid instead of asked of the network;
 // the same compositing, black background, and early termination once the transmittance falls
-// below a bound. Rows are shared among the intra-op threads (at::parallel_for).
+// below a bound. Rows are shared among the intra-op threads (at::parallel_for), a band of rows
+// at a time, so that a caller can stop a long march between bands.
 
 #include <torch/types.h>
 
 #include <cstdint>
+#include <functional>
+#include <optional>
 
 #include "bake/baked_frame.hpp"
 
@@ -37,5 +40,12 @@ struct BakedImages {
 BakedImages render_baked(const BakedFrame& frame, const torch::Tensor& K, const torch::Tensor& R,
                          const torch::Tensor& T, int width, int height,
                          const MarchOptions& options);
+
+// As above, asking `cancelled` on the calling thread between bands of rows (about 2^18 samples
+// per intra-op thread each): nullopt once it says true. The pixels are those above.
+std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Tensor& K,
+                                        const torch::Tensor& R, const torch::Tensor& T, int width,
+                                        int height, const MarchOptions& options,
+                                        const std::function<bool()>& cancelled);
 
 }  // namespace th::bake
