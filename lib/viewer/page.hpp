@@ -183,7 +183,8 @@ async function watchBake() {
       return;
     }
     if (r.state === 'failed') { $('bake').textContent = 'bake failed: ' + r.error; return; }
-    $('bake').textContent = 'baking frame ' + frame + ' for real-time views: ' + Math.round(100 * r.progress) + '%';
+    $('bake').textContent = r.waiting ? 'frame ' + frame + ' waits to be baked for real-time views'
+        : 'baking frame ' + frame + ' for real-time views: ' + Math.round(100 * r.progress) + '%';
     await new Promise((ok) => setTimeout(ok, 300));
   }
 }

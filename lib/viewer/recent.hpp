@@ -22,6 +22,12 @@ class Recent {
     return &it->second->second;
   }
 
+  // The value of `key` without making it the most recently used; null when absent.
+  const Value* peek(const Key& key) const {
+    const auto it = index_.find(key);
+    return it == index_.end() ? nullptr : &it->second->second;
+  }
+
   // Stores `value` as `key`'s, the most recently used; beyond capacity the least recently used
   // entry goes.
   Value& put(const Key& key, Value value) {

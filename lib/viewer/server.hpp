@@ -7,11 +7,11 @@
 //   GET /api/frame?human=H&frame=F
 //                         the body's centre and every dataset camera as eye/forward/up/fovy (JSON)
 //   GET /api/render?human=H&frame=F&eye=x,y,z&forward=x,y,z&up=x,y,z&fovy=DEG&width=W&height=H
-//                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C instead
-//                   of
-//                         eye..height renders dataset camera C exactly
-//   GET /api/bake?human=H&frame=F   starts the frame's bake in the background (METHOD 7.1) and
-//                         says how far it is: {"state": baking|ready|failed, "progress", ...}
+//                   [&samples=S][&mode=rgb|depth|acc][&seq=N][&client=ID]  a PNG; camera=C
+//                         instead of eye..height renders dataset camera C exactly
+//   GET /api/bake?human=H&frame=F   queues the frame's bake (METHOD 7.1) and says how far it
+//                         is: {"state": baking|ready|failed, "waiting" (not started yet),
+//                         "progress", "queued" (bakes waiting), "dropped" (so far), ...}
 //   GET /api/render?...&baked=1   the view from the frame's bake (404 until it is ready): no
 //                         network, milliseconds; format=jpeg for a JPEG instead of a PNG.
 //                         Every view answers with Server-Timing: march or render, then encode (ms)
@@ -22,13 +22,19 @@
 // One render runs at a time; a request with a higher seq from the same page (client=ID) cancels
 // that page's request in flight (409 for the cancelled one), so a dragged camera never waits
 // behind stale frames. Prepared frames and bakes are kept (the least recently used go first), so
-// only a frame's first view pays for them. A bake holds the renderer while it runs; baked views
-// never wait for it.
+// only a frame's first view pays for them.
 // A render is bounded: image side (max_size), samples (4096) and time (render_timeout_s, then
 // 503 naming the bound); it is cancelled between bands of rows when its client goes away or the
-// server stops. A request waiting for the renderer gets 503 with Retry-After when it has waited
-// longer than a render may take. /api/info, /api/frame, /api/reference and /api/ground_truth read
-// data only and answer while a render runs.
+// server stops. Requests and bakes take the renderer in the order they began to wait; a request
+// that has waited longer than a render may take gets 503 with Retry-After. /api/info,
+// /api/frame, /api/reference and /api/ground_truth read data only and answer while a render runs.
+// Bakes (viewer/schedule.hpp): one at a time, on one thread, holding the renderer while it runs;
+// at most 2 wait, the latest frames asked for. A waiting bake pushed out by a newer one, or a
+// bake (running or waiting) whose frame is no longer among the 4 kept, is dropped (a running one
+// between chunks of its network work), and queued again when its frame is asked for again.
+// A baked view needs no renderer and never waits for one; it has the bounds of a render (size,
+// samples, render_timeout_s, cancelled between bands of rows as a render is), and at most 4 run
+// at once: one more gets 503 with Retry-After.
 // As a server (viewer/access.hpp, viewer/listener.hpp): the Host header must name this server
 // (421 otherwise), the API answers its own page only (403 for cross-origin requests), request
 // bodies are refused unread (413), the port is exclusive, and slow or idle connections hold a
