@@ -25,7 +25,15 @@ and, as a server:
   - --host :: prints a URL that works and says where it listens; an unwritable k-means cache
     folder does not stop it;
   - SIGINT while a render runs stops it with exit 0 within seconds (the time is printed), as does
-    SIGTERM.
+    SIGTERM;
+and on a viewer of their own (--render-timeout 5, --max-size 1024), the bounds of bakes and baked
+views:
+  - 300 /api/bake requests over more frames than it keeps: its threads and memory stay as they
+    were, at most 2 bakes wait and the older ones are dropped, an exact render asked next is
+    served, and the latest frame asked for is baked;
+  - more baked views at once than the bound: 503 with Retry-After; their clients hang up: the
+    viewer's CPU time stops growing within a second or two;
+  - a baked view past --render-timeout: 503 naming the bound.
 Standard library only.
 """
 import argparse
@@ -79,6 +87,19 @@ def request(port, path, headers=None, method='GET', host='127.0.0.1', timeout=60
 def rss_kib(pid):
     with open(f'/proc/{pid}/status') as f:
         return next(int(line.split()[1]) for line in f if line.startswith('VmRSS:'))
+
+
+def proc_status(pid, key):
+    """A number of /proc/<pid>/status: Threads, VmSize (KiB), ..."""
+    with open(f'/proc/{pid}/status') as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(key + ':'))
+
+
+def cpu_seconds(pid):
+    """User and system CPU time the process has used (/proc/<pid>/stat), seconds."""
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def answer_length(data):
@@ -274,6 +295,131 @@ def check_as_server(port, pid, frame, cams, browser, work):
           (re.search(r'data-img="\w+"', dom) or [dom.strip()[-120:]])[0] + ')')
 
 
+def free_port():
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        return s.getsockname()[1]
+
+
+def wait_baked(base, human, frame, seconds):
+    """/api/bake's answer for the frame once it is ready or failed (or `seconds` have passed)."""
+    deadline = time.monotonic() + seconds
+    while True:
+        answer = json.loads(get(base, '/api/bake', {'human': human, 'frame': frame})[1])
+        if answer['state'] in ('ready', 'failed') or time.monotonic() > deadline:
+            return answer
+        time.sleep(0.2)
+
+
+def check_bake_bounds(binary, common, checkpoint):
+    """The bake queue and baked views' bounds, on a viewer of their own: the pose setting (2
+    people of 4 frames: more frames than it keeps bakes of), --render-timeout 5 (long enough to tell
+    a cancelled march from one stopped by the bound), --max-size 1024 (a baked view of many
+    seconds)."""
+    port = free_port()
+    base = f'http://127.0.0.1:{port}'
+    server, _, log = start_viewer(binary, [*common, 'eval.setting=pose', '--checkpoint', checkpoint, '--port',
+                                           str(port), '--render-timeout', '5', '--max-size', '1024'])
+    pid = server.pid
+    try:
+        info = json.loads(get(base, '/api/info')[1])
+        # Every (person, frame) the viewer takes, from the range its 400 names; 8 of them.
+        keys = []
+        for h in range(len(info['humans'])):
+            _, body = get(base, '/api/bake', {'human': h, 'frame': 1 << 20})
+            m = re.search(rb"must be in \[0, (\d+)\]", body)
+            keys += [(h, f) for f in range(int(m.group(1)) + 1)] if m else []
+        keys = keys[:8]
+        if len(keys) <= 4:
+            check(False, f'the dataset has more frames than the viewer keeps bakes of ({keys})')
+            return
+        # 300 requests over 8 frames, each answered at once, on one connection.
+        threads, vm = proc_status(pid, 'Threads'), proc_status(pid, 'VmSize')
+        conn = http.client.HTTPConnection('127.0.0.1', port, timeout=30)
+        answers = []
+        t0 = time.monotonic()
+        try:
+            for i in range(300):
+                h, f = keys[i % len(keys)]
+                conn.request('GET', f'/api/bake?human={h}&frame={f}')
+                r = conn.getresponse()
+                answers.append((r.status, json.loads(r.read()) if r.status == 200 else {}))
+        finally:
+            conn.close()
+        flood = time.monotonic() - t0
+        threads_now, vm_now = proc_status(pid, 'Threads'), proc_status(pid, 'VmSize')
+        print(f'time: 300 /api/bake requests over {len(keys)} frames: {flood:.2f} s; threads {threads} -> '
+              f'{threads_now}, VmSize {vm >> 10} -> {vm_now >> 10} MiB', flush=True)
+        queued = max((a.get('queued', 99) for _, a in answers), default=99)
+        dropped = answers[-1][1].get('dropped', 0)
+        check(all(s == 200 for s, _ in answers) and queued <= 2,
+              f'300 /api/bake requests over {len(keys)} frames: at most 2 bakes wait ({queued})')
+        check(dropped >= 250, f'the older bakes asked for are dropped ({dropped} of 300)')
+        check(threads_now <= threads + 2 and vm_now - vm < 512 << 10,
+              f'no thread per request: threads {threads} -> {threads_now}, VmSize {vm >> 10} -> {vm_now >> 10} MiB')
+        # An exact view waits behind the bake in flight at most, not behind the queue.
+        last_h, last_f = keys[299 % len(keys)]
+        c = json.loads(get(base, '/api/frame', {'human': last_h, 'frame': last_f})[1])['cameras'][3]
+        v = lambda x: ','.join(repr(float(a)) for a in x)
+        look = {'human': last_h, 'frame': last_f, 'eye': v(c['eye']), 'forward': v(c['forward']), 'up': v(c['up']),
+                'fovy': c['fovy'], 'width': 40, 'height': 30, 'seq': 1}
+        status, _, elapsed = request(port, '/api/render?' + urllib.parse.urlencode(look), timeout=120)
+        check(status == 200, f'an exact view asked right after is served ({status} in {elapsed:.1f} s)')
+        t0 = time.monotonic()
+        for h, f in (keys[298 % len(keys)], (last_h, last_f)):
+            bake = wait_baked(base, h, f, 120)
+        waited = time.monotonic() - t0
+        baked = sum('viewer: baked' in l for l in log)
+        check(bake['state'] == 'ready' and bake['queued'] == 0 and baked <= 4,
+              f'the latest frames asked for are baked in {waited:.1f} s, {baked} bakes in all ({bake})')
+        time.sleep(0.5)
+        threads_now, vm_now = proc_status(pid, 'Threads'), proc_status(pid, 'VmSize')
+        check(threads_now <= threads + 2 and vm_now - vm < 512 << 10,
+              f'and the threads and memory are as they were (threads {threads} -> {threads_now}, VmSize '
+              f'{vm >> 10} -> {vm_now >> 10} MiB)')
+
+        # Baked views, 1024x1024 at 4096 samples: many seconds each.
+        def heavy(client):
+            return '/api/render?' + urllib.parse.urlencode({**look, 'width': 1024, 'height': 1024, 'samples': 4096,
+                                                            'baked': 1, 'format': 'jpeg', 'client': client})
+        bound = info['baked_views']
+        views = [Background(port, heavy(f'baked{i}')) for i in range(bound)]
+        time.sleep(1.0)
+        conn = http.client.HTTPConnection('127.0.0.1', port, timeout=30)
+        try:
+            t0 = time.monotonic()
+            conn.request('GET', heavy('one-more'))
+            r = conn.getresponse()
+            status, text, retry = r.status, r.read().decode(), r.getheader('Retry-After')
+            elapsed = time.monotonic() - t0
+        finally:
+            conn.close()
+        check(status == 503 and retry and f'{bound} baked views' in text and elapsed < 2,
+              f'{bound + 1} baked views at once: the last gets 503 with Retry-After in {elapsed:.2f} s '
+              f'({status}, Retry-After {retry}: {text.strip()!r})')
+        cpu0 = cpu_seconds(pid)
+        time.sleep(0.5)
+        busy = (cpu_seconds(pid) - cpu0) / 0.5
+        running = sum(b.result is None for b in views)
+        for b in views:
+            b.abandon()
+        time.sleep(1.0)
+        cpu0 = cpu_seconds(pid)
+        time.sleep(1.0)
+        after = cpu_seconds(pid) - cpu0
+        print(f'time: CPU while {running} baked views run: {busy:.2f} s/s; 1-2 s after their clients hung up: '
+              f'{after:.2f} s/s', flush=True)
+        check(running == bound and busy > 0.3 and after < min(0.2, busy / 3),
+              f'baked views whose clients hung up stop using CPU ({busy:.2f} -> {after:.2f} s/s, {running} ran)')
+        check(any('a baked view was cancelled, its client went away' in l for l in log), 'the viewer says so')
+        status, text, elapsed = request(port, heavy('alone'), timeout=60)
+        check(status == 503 and '--render-timeout' in text and 'baked view' in text and elapsed < 9,
+              f'a baked view past --render-timeout 5: 503 naming the bound in {elapsed:.1f} s ({status}: {text.strip()!r})')
+    finally:
+        code, seconds = stop_timed(server, signal.SIGINT)
+        check(code == 0, f'SIGINT: exit 0 in {seconds:.2f} s ({code})')
+
+
 def png_size(data):
     if data[:8] != b'\x89PNG\r\n\x1a\n':
         return None
@@ -400,9 +546,9 @@ def main():
         check([s for s, _ in timings] == [200, 200] and timings[0][1].startswith('march;')
               and timings[1][1].startswith('render;') and all(stage.match(t) for _, t in timings),
               f'baked and exact views name their stages\' times on one connection ({timings})')
-        status, img = get(base, '/api/render', {**look, 'baked': 1, 'mode': 'depth', 'seq': 202})
+        status, img = get(base, '/api/render', {**look, 'baked': 1, 'mode': 'depth', 'seq': 206})
         check(status == 200 and png_size(img) == (40, 30), f'a baked depth view as a 40x30 PNG ({status})')
-        status, body = get(base, '/api/render', {'human': 0, 'frame': frame, 'camera': 3, 'baked': 1, 'seq': 203})
+        status, body = get(base, '/api/render', {'human': 0, 'frame': frame, 'camera': 3, 'baked': 1, 'seq': 207})
         check(status == 400 and b"'baked' views take eye..height" in body, f'a baked snap is refused ({status})')
 
         bad = [
@@ -514,6 +660,8 @@ def main():
         check(code == 0 and seconds < 10, f'SIGTERM during a render stops the viewer with exit 0 ({code}, {seconds:.2f} s)')
         time.sleep(0.2)
         check(not any('Traceback' in l or 'internal error' in l for l in rest), 'it printed no internal error')
+    check_bake_bounds(os.path.join(args.bin, 'transhuman-view'), common, args.checkpoint)
+
     # --host '' (every IPv4 interface) prints a loopback URL; --allow-host adds a name.
     with socket.socket() as s4:
         s4.bind(('127.0.0.1', 0))
