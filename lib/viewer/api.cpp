@@ -241,7 +241,8 @@ std::string Api::bake_json(const httplib::Request& req) {
   if (!options_.bake) throw HttpError{404, "baking is off (transhuman-view --no-bake)"};
   const BakeStatus status = bakes_.ask(h, f);
   Json answer;
-  // A bake waiting for its turn is "baking" too (as before there was a queue), not yet started.
+  // A bake waiting for its turn is "baking" too, so that a client polling while it is "baking"
+  // waits for it; "waiting" tells the two apart.
   answer["state"] = status.state == "queued" ? "baking" : status.state;
   answer["waiting"] = status.state == "queued";
   answer["progress"] = status.progress;

@@ -155,7 +155,6 @@ class Slots {
   explicit Slots(int count) : count_(count) {}
   // A slot, or nullopt when all are held.
   std::optional<Hold> try_take();
-  int count() const { return count_; }
 
  private:
   const int count_;
