@@ -274,11 +274,14 @@ void add_model_options(CLI::App& cli, ModelOptions& m) {
   cli.add_option(
       "--reference-views", m.reference_views,
       "reference cameras, comma-separated names or calibration indices (data.reference_views); "
-      "default: the split's, or without a split the most evenly spread");
+      "default: the split's, or without a split the most evenly spread")
+      ->each([&m](const std::string&) { m.reference_views_given = true; });
 }
 
 void apply_model_options(const ModelOptions& m, CommonOptions& options) {
   if (!m.setting.empty()) options.overrides.push_back("eval.setting=" + m.setting);
+  if (m.reference_views_given && m.reference_views.empty())
+    fail("--reference-views '': no camera named (leave the option out for the split's)");
   if (!m.reference_views.empty()) {
     // A YAML list of double-quoted strings: every camera name is read as written.
     std::string list;

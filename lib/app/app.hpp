@@ -91,7 +91,8 @@ int lock_run_dir(const std::filesystem::path& dir, const std::string& app_name);
 struct ModelOptions {
   std::string checkpoint;       // ours (.pt) or the reference's (.pth)
   std::string setting;          // overrides eval.setting when set
-  std::string reference_views;  // "a,b,c": overrides data.reference_views when set
+  std::string reference_views;  // "a,b,c": overrides data.reference_views when given
+  bool reference_views_given = false;  // given, even as '' (refused)
 };
 
 // Registers --checkpoint, --setting and --reference-views on `cli`.

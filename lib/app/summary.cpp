@@ -32,11 +32,17 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
     spdlog::info("body model: {} vertices, {} faces", smpl->num_vertices(), smpl->faces.size(0));
     bool training = true;  // the training setting is loaded as training loads it (patches)
     for (const auto& setting : {c.data.train_setting, c.data.test_setting}) {
+      const bool as_training = training;
       data::Dataset ds(c.data, setting,
                        training ? data::Dataset::Mode::Train : data::Dataset::Mode::Test, smpl);
       training = false;
       spdlog::info("  '{}': {} samples from {} humans", setting, ds.size(), ds.humans().size());
       if (!dry_run) continue;
+      if (ds.size() == 0 && !as_training) {
+        // Renders need no target view; transhuman-eval refuses such a setting by name.
+        spdlog::info("  '{}': no target view (new views only)", setting);
+        continue;
+      }
       if (ds.size() == 0) fail("setting '", setting, "' lists no samples");
       const auto sample = ds.load(0, uint64_t(c.seed));
       spdlog::info("  '{}': sample 0 loaded ({} x {} target, {} reference views)", setting,

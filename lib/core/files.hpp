@@ -40,6 +40,16 @@ inline void refuse_special_file(const std::filesystem::path& path, const std::st
   fail(what, " '", path.string(), "' is a ", file_kind(type), ", not a file");
 }
 
+// True when `path` exists (links followed), false when it does not; any other answer (a loop of
+// symbolic links, a folder that may not be searched) fails: "cannot use '<path>': <reason>".
+inline bool exists_or_fail(const std::filesystem::path& path) {
+  std::error_code ec;
+  const auto status = std::filesystem::status(path, ec);
+  if (status.type() == std::filesystem::file_type::not_found) return false;
+  if (ec) fail("cannot use '", path.string(), "': ", ec.message());
+  return true;
+}
+
 // True when `inner` is `outer` or lies inside it, both resolved first (absolute and normal, links
 // followed as far as the paths exist).
 bool path_within(const std::filesystem::path& inner, const std::filesystem::path& outer);

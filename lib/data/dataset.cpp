@@ -126,17 +126,51 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
       for (const auto& v : values) out.push_back(camera_index(*human, v.text, where, v.index));
       return out;
     };
+    // Reference cameras, each chosen once: an entry is a camera's name or an index.
+    const auto references = [&](const std::vector<CameraRef>& values, const std::string& where) {
+      const std::vector<int> out = resolve(values, where);
+      const auto how = [&](size_t i) {
+        const bool named = !values[i].index && human->camera_name(out[i]) == values[i].text;
+        return "entry " + std::to_string(i) + " '" + values[i].text + "' is " +
+               (named ? "its name" : "index " + std::to_string(out[i]));
+      };
+      for (size_t i = 0; i < out.size(); ++i)
+        for (size_t j = 0; j < i; ++j)
+          if (out[i] == out[j])
+            fail(where, ": ", range.name, "'s camera '", human->camera_name(out[i]),
+                 "' is chosen twice as a reference view (", how(j), ", ", how(i),
+                 "): choose each camera once");
+      return out;
+    };
+    // How many references the setting draws or spreads: from the split, or without one the key.
+    const bool counted = setting_.random_references ||
+                         (config.reference_views.empty() && setting_.reference_views.empty());
+    if (counted && setting_.num_reference_views > human->num_cameras())
+      fail(config.split_file.empty()
+               ? "config key 'data.num_reference_views' = " +
+                     std::to_string(setting_.num_reference_views) + " (" + split + ", setting '" +
+                     setting + "')"
+               : split + ": num_reference_views " + std::to_string(setting_.num_reference_views),
+           ": ", range.name, " has only ", human->num_cameras(), " cameras");
+    if (setting_.random_references && !config.reference_views.empty()) {
+      const std::string message = "data.reference_views (--reference-views) fixes the reference "
+                                  "cameras, but " + split + " draws " +
+                                  std::to_string(setting_.num_reference_views) +
+                                  " at random per sample";
+      // Training shares its config with evaluation, whose settings have fixed references.
+      if (mode != Mode::Train) fail(message, ": use a setting with fixed references");
+      warn_once(message + ": data.reference_views applies to evaluation only");
+    }
     if (setting_.random_references) {
-      if (setting_.num_reference_views > human->num_cameras())
-        fail(split, ": ", setting_.num_reference_views, " random references but ", range.name,
-             " has ", human->num_cameras(), " cameras");
+      // drawn per sample (get)
     } else if (!config.reference_views.empty()) {
-      for (const auto& v : config.reference_views)
-        views.references.push_back(camera_index(*human, v, "data.reference_views"));
+      std::vector<CameraRef> values;
+      for (const auto& v : config.reference_views) values.push_back({v, false});
+      views.references = references(values, "data.reference_views");
       spdlog::info("{}: reference cameras {} (data.reference_views)", range.name,
                    camera_list(*human, views.references));
     } else if (!setting_.reference_views.empty()) {
-      views.references = resolve(setting_.reference_views, split + ", reference_views");
+      views.references = references(setting_.reference_views, split + ", reference_views");
     } else {
       views.references = spread_cameras(*human, human->load_vertices(frames.front()),
                                         setting_.num_reference_views);
@@ -152,19 +186,30 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
             std::find(views.references.begin(), views.references.end(), c) ==
                 views.references.end())
           views.targets.push_back(c);
-      if (views.targets.empty())
-        fail(split, ": ", range.name, " has no camera left as a target besides its ",
-             views.references.size(), " reference views");
+      // Rendering new views needs no target; evaluation does (require_targets).
+      if (views.targets.empty() && no_targets_.empty())
+        no_targets_ = split + ": " + range.name + " has no camera left as a target besides its " +
+                      std::to_string(views.references.size()) + " reference views";
     } else {
       views.targets = resolve(setting_.target_views, split + ", target_views");
     }
     for (int frame : frames)
       for (int t : views.targets) items_.push_back({h, frame, t});
+    views.frames = frames;
     humans_.push_back(std::move(human));
     views_.push_back(std::move(views));
   }
   spdlog::info("dataset: {} '{}' — {} humans, {} samples", config::name_of(config.dataset), setting,
                humans_.size(), items_.size());
+}
+
+void Dataset::require_targets() const {
+  if (!no_targets_.empty()) fail(no_targets_);
+}
+
+const std::vector<int>& Dataset::frames(int human) const {
+  reference_views(human);  // checks the index
+  return views_[size_t(human)].frames;
 }
 
 const std::vector<int>& Dataset::reference_views(int human) const {
@@ -233,6 +278,24 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
                   "'" + human.calibration_file().string() + "': reference camera " +
                       std::to_string(v) + " of frame " + std::to_string(it.frame) + ": " + why,
                   human.dir().string() + "#view" + std::to_string(v));
+    const auto image_of = [&](int camera) {
+      return "'" + human.image_path(it.frame, camera).string() + "' (camera '" +
+             human.camera_name(camera) + "')";
+    };
+    if (cv::countNonZero(view.mask) == 0) {
+      std::string files;
+      for (const auto& f : human.mask_files(it.frame, v))
+        files += (files.empty() ? "'" : ", '") + f.string() + "'";
+      fail("reference view ", image_of(v), ": its mask ", files,
+           " marks no person pixel (non-zero pixels mark the person)");
+    }
+    if (!images.empty() && (images.front().size(1) != view.rgb.rows ||
+                            images.front().size(2) != view.rgb.cols))
+      fail("reference view ", image_of(v), " is ", view.rgb.cols, "x", view.rgb.rows,
+           " at data.ratio ", config_.ratio, " but reference view ",
+           image_of(s.reference_views.front()), " is ", images.front().size(2), "x",
+           images.front().size(1), ": the reference views of a sample share one image size ",
+           "(data.reference_views chooses others)");
     images.push_back(image_tensor(view.rgb).permute({2, 0, 1}));
     Ks.push_back(view.camera.K);
     Rs.push_back(view.camera.R);

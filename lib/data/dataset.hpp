@@ -76,11 +76,16 @@ class Dataset {
     int target_view;
   };
   size_t size() const { return items_.size(); }
+  // Fails when a person has no target view (every camera a reference, without a split): what
+  // evaluation needs and rendering new views does not.
+  void require_targets() const;
   const Item& item(size_t index) const { return items_.at(index); }
   const std::vector<std::shared_ptr<HumanSequence>>& humans() const { return humans_; }
   const SplitSetting& setting() const { return setting_; }
   // The fixed reference cameras of human `human` (empty with random references).
   const std::vector<int>& reference_views(int human) const;
+  // The frames the setting lists for human `human` (index into humans()), target views or not.
+  const std::vector<int>& frames(int human) const;
   const body::SmplModel& smpl() const { return *smpl_; }
   Mode mode() const { return mode_; }
 
@@ -101,10 +106,11 @@ class Dataset {
   std::shared_ptr<const body::SmplModel> smpl_;
   std::vector<std::shared_ptr<HumanSequence>> humans_;
   struct Views {
-    std::vector<int> references, targets;
+    std::vector<int> references, targets, frames;
   };
   std::vector<Views> views_;  // per human
   std::vector<Item> items_;
+  std::string no_targets_;  // why a person has no target view, or ""
 };
 
 // The SMPL model a data config names (data.smpl_model, default <root>/smpl_model.npz).

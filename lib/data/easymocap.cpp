@@ -24,14 +24,78 @@ namespace {
 // Tolerance between a camera's two rotation forms (Rodrigues R_<c> against Rot_<c>).
 constexpr double kRotationAgreement = 1e-4;
 
+// Bounds on a calibration file, checked before OpenCV parses it: its YAML, JSON and XML parsers
+// recurse once per level of nesting, so a deeply nested file would overflow the stack.
+// EasyMocap's files nest two levels and hold a few hundred values per camera.
+constexpr uintmax_t kMaxCalibrationBytes = uintmax_t{1} << 20;
+constexpr int kMaxCalibrationDepth = 64;
+
+// The deepest nesting `text` could hold, counted without parsing: flow brackets ([ {) and XML
+// elements outside quotes, and on each line the columns before its first value (a block level
+// takes at least one column, "- " two).
+int nesting_bound(const std::string& text) {
+  int deepest = 0, flow = 0, xml = 0;
+  char quote = 0;
+  bool line_start = true;
+  int indent = 0;
+  for (size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (c == '\n') {
+      line_start = true, indent = 0;
+      continue;
+    }
+    if (line_start) {
+      if (c == ' ' || c == '\t' || (c == '-' && i + 1 < text.size() && text[i + 1] == ' ')) {
+        deepest = std::max(deepest, ++indent);
+        continue;
+      }
+      line_start = false;
+    }
+    if (quote) {
+      if (c == quote) quote = 0;
+      continue;
+    }
+    if (c == '"' || c == '\'') {
+      quote = c;
+    } else if (c == '#' && (i == 0 || text[i - 1] == ' ')) {
+      while (i + 1 < text.size() && text[i + 1] != '\n') ++i;  // a comment
+    } else if (c == '[' || c == '{') {
+      deepest = std::max(deepest, ++flow + indent);
+    } else if ((c == ']' || c == '}') && flow > 0) {
+      --flow;
+    } else if (c == '<' && i + 1 < text.size()) {
+      const char next = text[i + 1];
+      if (next == '/') {
+        xml = std::max(0, xml - 1);
+      } else if (next != '?' && next != '!') {
+        const size_t end = text.find('>', i);
+        if (end == std::string::npos || text[end - 1] != '/') deepest = std::max(deepest, ++xml);
+      }
+    }
+  }
+  return deepest;
+}
+
 cv::FileStorage open_storage(const fs::path& file) {
   refuse_special_file(file, "calibration");
   std::error_code ec;
-  if (!fs::is_regular_file(file, ec))
+  if (!fs::is_regular_file(file, ec)) {
+    if (ec && ec != std::errc::no_such_file_or_directory)
+      fail("cannot use '", file.string(), "': ", ec.message());
     fail("'", file.string(), "' is missing (EasyMocap's layout needs intri.yml and extri.yml)");
+  }
+  const uintmax_t bytes = fs::file_size(file, ec);
+  if (!ec && bytes > kMaxCalibrationBytes)
+    fail("'", file.string(), "' is ", bytes, " bytes, more than a calibration file may be (",
+         kMaxCalibrationBytes, ")");
+  std::ifstream in(file, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (const int depth = nesting_bound(text); depth > kMaxCalibrationDepth)
+    fail("'", file.string(), "' nests ", depth, " levels deep, more than a calibration file may (",
+         kMaxCalibrationDepth, "; EasyMocap writes 2)");
   cv::FileStorage storage;
   try {
-    storage.open(file.string(), cv::FileStorage::READ);
+    storage.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY);
   } catch (const cv::Exception& e) {
     fail("'", file.string(), "' cannot be read as OpenCV FileStorage YAML: ", e.err);
   }
@@ -45,8 +109,10 @@ std::vector<std::string> read_names(const cv::FileStorage& storage, const fs::pa
     fail("'", file.string(), "' has no 'names' list of camera names");
   std::vector<std::string> names;
   for (const auto& item : node) {
-    if (!item.isString()) fail("'", file.string(), "': names[", names.size(), "] is not a string");
-    const std::string name = item.string();
+    // EasyMocap's writer quotes names; a list written by hand may hold bare numbers (- 1).
+    if (!item.isString() && !item.isInt())
+      fail("'", file.string(), "': names[", names.size(), "] is neither a string nor an integer");
+    const std::string name = item.isInt() ? std::to_string(int(item)) : item.string();
     if (name.empty() || name == "." || name == ".." ||
         name.find_first_of("/\\") != std::string::npos)
       fail("'", file.string(), "': names[", names.size(), "] = '", name, "' is not a folder name");
@@ -120,6 +186,50 @@ torch::Tensor field(const nlohmann::json& person, const char* key, size_t expect
   return torch::tensor(v, torch::kFloat64);
 }
 
+// Bounds on an SMPL fit file, checked before its values are walked: EasyMocap writes a list of a
+// few people, each a map of arrays of arrays (nesting 4), a few kilobytes a frame.
+constexpr uintmax_t kMaxFitBytes = uintmax_t{8} << 20;
+constexpr int kMaxFitDepth = 8;
+
+// The people of an SMPL fit file, a list (one person alone may be written as an object).
+nlohmann::json read_fit(const fs::path& file) {
+  std::error_code ec;
+  const uintmax_t bytes = fs::file_size(file, ec);
+  if (!ec && bytes > kMaxFitBytes)
+    fail("'", file.string(), "' is ", bytes, " bytes, more than an SMPL fit file may be (",
+         kMaxFitBytes, ")");
+  // Parsed with a callback that stops at the first value nested deeper than kMaxFitDepth, naming
+  // the key it lies under (the parser itself keeps its own stack, the walks below recurse).
+  std::vector<std::string> keys;
+  const auto bound = [&](int depth, nlohmann::json::parse_event_t event, nlohmann::json& value) {
+    if (event == nlohmann::json::parse_event_t::key) {
+      keys.resize(size_t(depth));
+      keys.push_back(value.get<std::string>());
+    }
+    if (depth > kMaxFitDepth) {
+      std::string path;
+      for (const auto& k : keys)
+        if (!k.empty()) path += (path.empty() ? "" : ".") + k;
+      fail("'", file.string(), "': ", path.empty() ? "the list" : "key '" + path + "'",
+           " nests more than ", kMaxFitDepth, " levels deep (EasyMocap writes 4)");
+    }
+    return true;
+  };
+  nlohmann::json people;
+  try {
+    std::ifstream in(file);
+    people = nlohmann::json::parse(in, bound);
+  } catch (const nlohmann::json::exception& e) {
+    fail("'", file.string(), "' is not valid JSON: ", e.what());
+  }
+  if (people.is_object()) {
+    nlohmann::json list = nlohmann::json::array();
+    list.push_back(std::move(people));
+    return list;
+  }
+  return people;
+}
+
 }  // namespace
 
 std::shared_ptr<EasyMocapSequence> EasyMocapSequence::open(const fs::path& dir,
@@ -141,13 +251,26 @@ void EasyMocapSequence::read_calibration(CalibrationCheck check) {
   const fs::path intri_file = dir() / "intri.yml", extri_file = dir() / "extri.yml";
   const cv::FileStorage intri = open_storage(intri_file), extri = open_storage(extri_file);
   camera_names_ = read_names(intri, intri_file);
-  if (!extri["names"].empty() && read_names(extri, extri_file) != camera_names_)
-    fail("'", extri_file.string(), "' and '", intri_file.string(),
-         "' list different cameras in 'names'");
+  if (!extri["names"].empty()) {  // the same cameras, in any order (intri.yml's order is used)
+    const std::vector<std::string> extri_names = read_names(extri, extri_file);
+    const auto only_in = [&](const std::vector<std::string>& names,
+                             const std::vector<std::string>& other, const fs::path& file) {
+      for (const std::string& c : names)
+        if (std::find(other.begin(), other.end(), c) == other.end())
+          fail("'", extri_file.string(), "' and '", intri_file.string(),
+               "' list different cameras in 'names': '", c, "' is only in '", file.string(), "'");
+    };
+    only_in(extri_names, camera_names_, extri_file);
+    only_in(camera_names_, extri_names, intri_file);
+  }
   for (const std::string& c : camera_names_) {
     Camera cam;
     cam.K = read_matrix(intri, intri_file, "K_" + c, {{3, 3}});
-    cam.D = read_matrix(intri, intri_file, "dist_" + c, {{1, 5}, {5, 1}}).reshape({5, 1});
+    // k1, k2, p1, p2[, k3]: EasyMocap writes four coefficients as often as five (k3 = 0).
+    const torch::Tensor dist =
+        read_matrix(intri, intri_file, "dist_" + c, {{1, 5}, {5, 1}, {1, 4}, {4, 1}}).reshape({-1});
+    cam.D = torch::zeros({5, 1}, torch::kFloat64);
+    cam.D.reshape({5}).slice(0, 0, dist.numel()).copy_(dist);
     const bool has_rot = !extri["Rot_" + c].empty(), has_r = !extri["R_" + c].empty();
     if (!has_rot && !has_r)
       fail("'", extri_file.string(), "' has neither 'Rot_", c, "' nor 'R_", c, "'");
@@ -242,21 +365,13 @@ BodyParams EasyMocapSequence::load_params(int frame) const {
   check_frame(frame);
   const std::string file_name = frames_[size_t(frame)].stem + ".json";
   fs::path file = dir() / "output" / "smpl" / file_name;
-  std::error_code ec;
-  if (!fs::exists(file, ec)) file = dir() / "smpl" / file_name;
-  if (!fs::exists(file, ec))
+  if (!exists_or_fail(file)) file = dir() / "smpl" / file_name;
+  if (!exists_or_fail(file))
     fail("'", (dir() / "output" / "smpl" / file_name).string(), "' is missing (nor is there '",
          file.string(), "'): EasyMocap's multi-view SMPL fit of frame ",
          frames_[size_t(frame)].number);
   refuse_special_file(file, "SMPL parameters");
-  nlohmann::json people;
-  try {
-    std::ifstream in(file);
-    people = nlohmann::json::parse(in);
-  } catch (const nlohmann::json::exception& e) {
-    fail("'", file.string(), "' is not valid JSON: ", e.what());
-  }
-  if (people.is_object()) people = nlohmann::json::array({people});
+  const nlohmann::json people = read_fit(file);
   if (!people.is_array())
     fail("'", file.string(), "' must hold a list of people, not ", people.type_name());
   if (people.empty())
@@ -266,8 +381,12 @@ BodyParams EasyMocapSequence::load_params(int frame) const {
     const auto& p = people[i];
     if (!p.is_object())
       fail("'", file.string(), "': person [", i, "] is ", p.type_name(), ", not an object");
-    ids.push_back(p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>()
-                                                                  : int64_t(i));
+    const int64_t id = p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>()
+                                                                         : int64_t(i);
+    if (std::find(ids.begin(), ids.end(), id) != ids.end())
+      fail("'", file.string(), "': people [", std::find(ids.begin(), ids.end(), id) - ids.begin(),
+           "] and [", i, "] have the same id ", id, " (which one data.person_id means is unclear)");
+    ids.push_back(id);
   }
   std::string found;
   for (const auto id : ids) found += (found.empty() ? "" : ", ") + std::to_string(id);
@@ -301,26 +420,18 @@ torch::Tensor EasyMocapSequence::load_vertices(int frame) const {
   return body::smpl_to_world(posed.vertices, p.Rh, p.Th).to(torch::kFloat32).to(torch::kFloat64);
 }
 
-cv::Mat EasyMocapSequence::load_mask(int frame, int cam) const {
+std::vector<fs::path> EasyMocapSequence::mask_files(int frame, int cam) const {
   const fs::path image = image_path(frame, cam);
   const std::string file = image.stem().string() + ".png";
-  cv::Mat mask;
-  std::vector<fs::path> tried;
+  std::vector<fs::path> tried, found;
   for (const char* folder : {"mask", "masks"}) {
-    const fs::path path = dir() / folder / camera_name(cam) / file;
-    tried.push_back(path);
-    std::error_code ec;
-    if (!fs::exists(path, ec)) continue;
-    cv::Mat m = read_image(path, cv::IMREAD_GRAYSCALE) != 0;
-    if (!mask.empty() && m.size() != mask.size())
-      fail("'", path.string(), "' is ", m.cols, "x", m.rows, " but '", tried[0].string(), "' is ",
-           mask.cols, "x", mask.rows);
-    mask = mask.empty() ? m : (mask | m);
+    tried.push_back(dir() / folder / camera_name(cam) / file);
+    if (exists_or_fail(tried.back())) found.push_back(tried.back());
   }
-  if (mask.empty())
+  if (found.empty())
     fail("no mask for '", image.string(), "': neither '", tried[0].string(), "' nor '",
          tried[1].string(), "' exists (non-zero pixels mark the person; docs/YOUR_CAPTURE.md)");
-  return mask / 255;
+  return found;
 }
 
 }  // namespace th::data

@@ -65,8 +65,8 @@ const std::string& HumanSequence::camera_name(int index) const {
 DataLayout detect_layout(const fs::path& dir) {
   std::error_code ec;
   // exists, not is_regular_file: a FIFO or device in their place is refused by the reader, by name.
-  const bool zju = fs::exists(dir / "annots.npy", ec);
-  const bool easymocap = fs::exists(dir / "intri.yml", ec) || fs::exists(dir / "extri.yml", ec);
+  const bool zju = exists_or_fail(dir / "annots.npy");
+  const bool easymocap = exists_or_fail(dir / "intri.yml") || exists_or_fail(dir / "extri.yml");
   if (zju && easymocap)
     fail("'", dir.string(),
          "' holds both annots.npy (ZJU-MoCap's layout) and intri.yml/extri.yml (EasyMocap's): ",
@@ -97,7 +97,7 @@ int camera_index(const HumanSequence& human, const std::string& value, const std
   const auto number = config::decimal_integer(value);
   if (number && *number >= 0 && *number < human.num_cameras()) return int(*number);
   if (number)
-    fail(where, ": camera ", value, " does not exist for ", human.name(), " (", human.num_cameras(),
+    fail(where, ": camera ", *number, " does not exist for ", human.name(), " (", human.num_cameras(),
          " cameras, indices 0 to ", human.num_cameras() - 1, ")");
   std::string names;
   for (int c = 0; c < human.num_cameras() && c < 40; ++c)
@@ -122,7 +122,7 @@ std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor&
   const torch::Tensor C = torch::stack(centres);
   const torch::Tensor body = body_vertices.to(torch::kFloat64).mean(0);
   const torch::Tensor centred = C - C.mean(0);
-  const auto svd = torch::linalg_svd(centred, false);
+  const auto svd = torch::linalg_svd(centred, true);  // all three directions, even for 2 cameras
   const torch::Tensor normal = std::get<2>(svd)[2];
   // An in-plane basis (u, v) around the normal.
   torch::Tensor seed = torch::zeros({3}, torch::kFloat64);
@@ -181,6 +181,7 @@ void require_finite(const torch::Tensor& t, const fs::path& file, const std::str
 
 cv::Mat read_image(const fs::path& path, int flags) {
   refuse_special_file(path, "image");
+  exists_or_fail(path);  // a loop of links is not "missing or corrupt"
   cv::Mat img = cv::imread(path.string(), flags);
   if (img.empty()) fail("cannot read image '", path.string(), "' (missing or corrupt)");
   std::string ext = path.extension().string();
@@ -189,6 +190,34 @@ cv::Mat read_image(const fs::path& path, int flags) {
   if ((ext == ".jpg" || ext == ".jpeg") && jpeg_truncated(path))
     fail("image '", path.string(), "' is truncated (no JPEG end marker)");
   return img;
+}
+
+cv::Mat read_mask(const fs::path& path) {
+  const cv::Mat m = read_image(path, cv::IMREAD_UNCHANGED);
+  std::vector<cv::Mat> channels;
+  cv::split(m, channels);
+  if (channels.size() == 4) {
+    double lowest = 0, highest = 0;
+    cv::minMaxLoc(channels[3], &lowest, &highest);
+    if (lowest < highest) return channels[3] != 0;
+    channels.pop_back();  // an opaque (or wholly transparent) image: its colours mark the person
+  }
+  cv::Mat person = channels.front() != 0;
+  for (size_t c = 1; c < channels.size(); ++c) person |= channels[c] != 0;
+  return person;
+}
+
+cv::Mat HumanSequence::load_mask(int frame, int cam) const {
+  const std::vector<fs::path> files = mask_files(frame, cam);
+  cv::Mat mask;
+  for (const fs::path& file : files) {
+    const cv::Mat m = read_mask(file);
+    if (!mask.empty() && m.size() != mask.size())
+      fail("'", file.string(), "' is ", m.cols, "x", m.rows, " but '", files.front().string(),
+           "' is ", mask.cols, "x", mask.rows);
+    mask = mask.empty() ? m : (mask | m);
+  }
+  return mask / 255;  // 0/1
 }
 
 ViewImage load_view(const HumanSequence& human, int frame, int cam, const ViewOptions& o) {

@@ -60,8 +60,12 @@ class HumanSequence {
   virtual BodyParams load_params(int frame) const = 0;
   // (V, 3) float64 world vertices of the frame's fit.
   virtual torch::Tensor load_vertices(int frame) const = 0;
-  // The person's mask at the image's resolution, CV_8U 0/1 (before undistortion).
-  virtual cv::Mat load_mask(int frame, int camera) const = 0;
+  // The mask files of (frame, camera) that exist, read in this order (ZJU-MoCap: mask/ and
+  // mask_cihp/; EasyMocap: mask/ and masks/). Throws naming where it looked when none does.
+  virtual std::vector<std::filesystem::path> mask_files(int frame, int camera) const = 0;
+  // The person's mask at the image's resolution, CV_8U 0/1 (before undistortion): the union of
+  // mask_files, each read by read_mask.
+  cv::Mat load_mask(int frame, int camera) const;
 
  protected:
   HumanSequence(std::string name, std::filesystem::path dir)
@@ -109,6 +113,10 @@ std::vector<int> spread_cameras(const HumanSequence& human, const torch::Tensor&
 // Reads an image, refusing special files, unreadable and truncated (JPEG without its end marker)
 // ones, naming the path.
 cv::Mat read_image(const std::filesystem::path& path, int flags);
+// A mask file as CV_8U, 255 where it marks the person: a non-zero value at any bit depth (8- or
+// 16-bit, 0/1 or 0/255 alike), in any channel of a colour image, or in the alpha channel where
+// one varies (an alpha-only cut-out). Throws naming the path as read_image does.
+cv::Mat read_mask(const std::filesystem::path& path);
 // Every value of `t` finite, else an error naming the file, `what` and the first offender.
 void require_finite(const torch::Tensor& t, const std::filesystem::path& file,
                     const std::string& what);

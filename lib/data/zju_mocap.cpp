@@ -122,7 +122,7 @@ fs::path ZjuMocapSequence::resolve(const fs::path& relative) const {
 
 std::optional<fs::path> ZjuMocapSequence::find(const fs::path& relative) const {
   const fs::path direct = dir() / relative;
-  if (fs::exists(direct)) return direct;
+  if (exists_or_fail(direct)) return direct;
   // Renamed or original CoreView_313/315 names: look the frame number up in the folder.
   const fs::path folder = direct.parent_path();
   const int number = frame_number_of(relative.filename().string());
@@ -184,27 +184,20 @@ torch::Tensor ZjuMocapSequence::load_vertices(int frame) const {
   return v.to(torch::kFloat64);
 }
 
-cv::Mat ZjuMocapSequence::load_mask(int frame, int cam) const {
+std::vector<fs::path> ZjuMocapSequence::mask_files(int frame, int cam) const {
   image_path(frame, cam);  // checks the indices
   fs::path rel = ims_[frame][cam];
   rel.replace_extension(".png");
-  cv::Mat mask;
   std::vector<std::string> tried;
+  std::vector<fs::path> found;
   for (const char* folder : {"mask", "mask_cihp"}) {
     tried.push_back((dir() / folder / rel).string());
-    const auto p = find(folder / rel);
-    if (!p) continue;
-    cv::Mat m = read_image(*p, cv::IMREAD_GRAYSCALE);
-    m = m != 0;
-    if (!mask.empty() && m.size() != mask.size())
-      fail("'", p->string(), "' is ", m.cols, "x", m.rows, " but '", tried[0], "' is ", mask.cols,
-           "x", mask.rows);
-    mask = mask.empty() ? m : (mask | m);
+    if (const auto p = find(folder / rel)) found.push_back(*p);
   }
-  if (mask.empty())
+  if (found.empty())
     fail("no mask for '", ims_[frame][cam], "': neither '", tried[0], "' nor '", tried[1],
          "' exists");
-  return mask / 255;  // 0/1
+  return found;
 }
 
 fs::path visibility_file(const fs::path& root, const HumanSequence& human, int frame, int cam) {

@@ -38,8 +38,8 @@ class ZjuMocapSequence final : public HumanSequence {
   int frame_number(int frame) const override;
   BodyParams load_params(int frame) const override;
   torch::Tensor load_vertices(int frame) const override;
-  // Union of mask/ and mask_cihp/.
-  cv::Mat load_mask(int frame, int camera) const override;
+  // mask/ and mask_cihp/, whichever exist.
+  std::vector<std::filesystem::path> mask_files(int frame, int camera) const override;
 
  private:
   ZjuMocapSequence(std::string name, std::filesystem::path dir)

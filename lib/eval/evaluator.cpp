@@ -109,6 +109,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   const auto smpl = data::load_body_model(config.data);
   auto dataset =
       std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
+  dataset->require_targets();
   model::TransHuman model(config.model);
   pipeline::load_weights(*model, checkpoint, config.eval.model_mismatch == MismatchPolicy::warn);
   model->to(device);

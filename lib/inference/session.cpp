@@ -54,15 +54,7 @@ const data::HumanSequence& Session::human(int index) const {
   return *dataset_->humans().at(size_t(index));
 }
 
-std::vector<int> Session::setting_frames(int index) const {
-  std::vector<int> frames;
-  for (size_t i = 0; i < dataset_->size(); ++i) {
-    const auto& item = dataset_->item(i);
-    if (item.human == index && (frames.empty() || frames.back() != item.frame))
-      frames.push_back(item.frame);
-  }
-  return frames;
-}
+std::vector<int> Session::setting_frames(int index) const { return dataset_->frames(index); }
 
 torch::Tensor Session::body_center(int human_index, int frame) const {
   const auto& h = human(human_index);

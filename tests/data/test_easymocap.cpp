@@ -3,6 +3,7 @@
 #include <functional>
 #include <opencv2/core/persistence.hpp>
 #include <opencv2/imgcodecs.hpp>
+#include <regex>
 #include <sstream>
 
 #include "body/smpl.hpp"
@@ -168,13 +169,28 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
          });
        },
        "'K_05' is 2x3, expected 3x3"},
-      {"dist 1x4",
+      {"dist 1x3",
        [](const fs::path& d) {
          rewrite(d / "intri.yml", [](auto&, auto& e) {
-           entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone();
+           entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 3).clone();
          });
        },
-       "'dist_05' is 1x4, expected 1x5 or 5x1"},
+       "'dist_05' is 1x3, expected 1x5 or 5x1 or 1x4 or 4x1"},
+      {"intri.yml nested 100,000 deep",
+       [](const fs::path& d) {
+         write_text(d / "intri.yml", read_text(d / "intri.yml") + "junk: " +
+                                         std::string(100000, '[') + std::string(100000, ']') +
+                                         "\n");
+       },
+       "intri.yml' nests 100000 levels deep, more than a calibration file may (64"},
+      {"extri.yml of 2 MiB",
+       [](const fs::path& d) { fs::resize_file(d / "extri.yml", 2 << 20); },
+       "extri.yml' is 2097152 bytes, more than a calibration file may be (1048576)"},
+      {"a camera only in extri.yml",
+       [](const fs::path& d) {
+         rewrite(d / "extri.yml", [](auto& n, auto&) { n.back() = "99"; });
+       },
+       "list different cameras in 'names': '99' is only in '"},
       {"NaN in K",
        [](const fs::path& d) {
          rewrite(d / "intri.yml",
@@ -230,6 +246,36 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
   const auto rodrigues_only = EasyMocapSequence::open(alone, options());
   CHECK(torch::allclose(rodrigues_only->camera(5).R, clean->camera(5).R, 0, 1e-12));
   CHECK(torch::equal(rodrigues_only->camera(5).D, clean->camera(5).D));
+
+  // As EasyMocap writes them too: four distortion coefficients (k3 = 0), cameras named by bare
+  // numbers, extri.yml's cameras in another order.
+  const fs::path variants = capture_copy("easymocap_variants");
+  rewrite(variants / "intri.yml", [](auto&, auto& e) {
+    entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone();
+  });
+  rewrite(variants / "extri.yml", [](auto& n, auto&) { std::reverse(n.begin(), n.end()); });
+  const auto read = EasyMocapSequence::open(variants, options());
+  CHECK(torch::equal(read->camera(5).D.slice(0, 0, 4), clean->camera(5).D.slice(0, 0, 4)));
+  CHECK(read->camera(5).D[4].item<double>() == 0.0);
+  CHECK(torch::equal(read->camera(7).R, clean->camera(7).R));
+  CHECK(read->camera_name(0) == "00");
+  // Cameras named 0..22, the names written as bare numbers (- 5), keys and folders to match.
+  const fs::path numbered = capture_copy("easymocap_numbered");
+  for (const char* file : {"intri.yml", "extri.yml"})
+    write_text(numbered / file,
+               std::regex_replace(
+                   std::regex_replace(read_text(numbered / file),
+                                      std::regex("- \"0?([0-9]+)\""), "- $1"),
+                   std::regex("_0([0-9]):"), "_$1:"));
+  for (const char* folder : {"images", "mask"})
+    for (int c = 0; c < 10; ++c)
+      fs::rename(numbered / folder / ("0" + std::to_string(c)),
+                 numbered / folder / std::to_string(c));
+  REQUIRE_THAT(read_text(numbered / "intri.yml"), Catch::Contains("- 5\n"));
+  const auto named = EasyMocapSequence::open(numbered, options());
+  CHECK(named->camera_name(5) == "5");
+  CHECK(named->camera_name(12) == "12");
+  CHECK(torch::equal(named->camera(5).K, clean->camera(5).K));
 }
 
 TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "[easymocap]") {
@@ -310,6 +356,62 @@ TEST_CASE("EasyMocap's SMPL files and masks are checked when a frame is read", "
   fs::copy_file(th::test::tiny_easymocap_dataset() / "CoreView_s03" / "mask" / "05" / "000001.png",
                 dir / "masks" / "05" / "000001.png");
   CHECK(cv::countNonZero(open(dir)->load_mask(1, 5)) > 0);
+
+  // Masks at any depth, or as an alpha-only cut-out, read as the 8-bit mask reads.
+  const fs::path mask05 = fs::path("mask") / "05" / "000001.png";
+  const cv::Mat eight = open(capture_copy("easymocap_mask8"))->load_mask(1, 5);
+  REQUIRE(cv::countNonZero(eight) > 0);
+  for (const std::string kind : {"u16_255", "u16_1", "rgba", "colour"}) {
+    INFO(kind);
+    dir = damaged("mask_" + kind, [&](const fs::path& d) {
+      cv::Mat m = eight.clone(), out;
+      if (kind == "u16_255") m.convertTo(out, CV_16U, 255);
+      if (kind == "u16_1") m.convertTo(out, CV_16U);
+      if (kind == "rgba") {
+        const cv::Mat zero = cv::Mat::zeros(m.size(), CV_8U);
+        cv::merge(std::vector<cv::Mat>{zero, zero, zero, m * 255}, out);
+      }
+      if (kind == "colour") {
+        const cv::Mat zero = cv::Mat::zeros(m.size(), CV_8U);
+        cv::merge(std::vector<cv::Mat>{zero, m * 7, zero}, out);
+      }
+      cv::imwrite((d / mask05).string(), out);
+    });
+    CHECK(cv::countNonZero(open(dir)->load_mask(1, 5) != eight) == 0);
+  }
+  // An opaque RGBA mask: its colours mark the person.
+  dir = damaged("mask_opaque", [&](const fs::path& d) {
+    cv::Mat out, grey = eight * 255;
+    cv::merge(std::vector<cv::Mat>{grey, grey, grey, cv::Mat(grey.size(), CV_8U, 255)}, out);
+    cv::imwrite((d / mask05).string(), out);
+  });
+  CHECK(cv::countNonZero(open(dir)->load_mask(1, 5) != eight) == 0);
+
+  // Nesting and size bounded before the values are walked; ids distinct.
+  dir = damaged("deep", [&](const fs::path& d) {
+    std::string t = read_text(d / smpl1);
+    t.insert(t.find("\"poses\":[") + 9, std::string(100000, '[') + std::string(100000, ']') + ",");
+    write_text(d / smpl1, t);
+  });
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("key 'poses' nests more than 8 levels deep"));
+  dir = damaged("large", [&](const fs::path& d) { fs::resize_file(d / smpl1, 9 << 20); });
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("more than an SMPL fit file may be (8388608)"));
+  dir = damaged("same_ids", [&](const fs::path& d) {
+    std::string one = read_text(d / smpl1);
+    one = one.substr(1, one.rfind(']') - 1);
+    write_text(d / smpl1, "[" + one + "," + one + "]");
+  });
+  CHECK_THROWS_WITH(open(dir, 0)->load_params(1),
+                    Catch::Contains("people [0] and [1] have the same id 0"));
+  // A link loop is named as such, not "missing".
+  dir = damaged("loop", [&](const fs::path& d) {
+    fs::remove(d / smpl1);
+    fs::create_symlink("000001.json", d / smpl1);
+  });
+  CHECK_THROWS_WITH(open(dir)->load_params(1),
+                    Catch::Contains("Too many levels of symbolic links"));
 
   dir = damaged("mask_size", [&](const fs::path& d) {
     cv::imwrite((d / "mask" / "05" / "000001.png").string(), cv::Mat::zeros(10, 12, CV_8U));
