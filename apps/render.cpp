@@ -4,12 +4,15 @@
 #include <spdlog/spdlog.h>
 
 #include <iostream>
+#include <optional>
 
 #include "app/app.hpp"
 #include "app/ranks.hpp"
 #include "app/summary.hpp"
 #include "bake/bake.hpp"
 #include "core/error.hpp"
+#include "core/files.hpp"
+#include "core/resources.hpp"
 #include "inference/free_view.hpp"
 
 int main(int argc, char** argv) {
@@ -50,8 +53,10 @@ int main(int argc, char** argv) {
     cli.add_flag("--baked", baked,
                  "render from the frame baked to a sparse grid (METHOD 7.1): a bake per body "
                  "frame, then every view in milliseconds, a little less exact");
-    cli.add_option("--bake-voxel", bake.voxel, "bake: grid spacing in metres (default 0.02)")
-        ->check(CLI::Range(0.001, 0.2));
+    auto* bake_voxel =
+        cli.add_option("--bake-voxel", bake.voxel,
+                       "bake: grid spacing in metres (default 0.02; with --baked or --bake-in)")
+            ->check(th::app::in_range(0.001, 0.2));
     cli.add_option("--bake-in", bake_in,
                    "bake: read this baked frame (written by --bake-out) instead of baking; "
                    "implies --baked")
@@ -68,9 +73,10 @@ int main(int argc, char** argv) {
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     th::app::apply_model_options(model, options);
     if (!bake_in.empty()) baked = true;
+    if (*bake_voxel && !baked)
+      th::fail("--bake-voxel sets the grid of a bake: it needs --baked (or --bake-in)");
     if (!bake_out.empty() && !baked) th::fail("--bake-out needs --baked");
-    if (!bake_out.empty() && std::filesystem::exists(bake_out))
-      th::fail("--bake-out '", bake_out.string(), "' exists: name a new file");
+    if (!bake_in.empty()) th::refuse_special_file(bake_in, "--bake-in");
     options.inputs.push_back({"the baked frame (--bake-in)", bake_in});
     request.force = options.force;
     options.inputs.push_back({"the camera path (--path)", request.path_file});
@@ -82,27 +88,53 @@ int main(int argc, char** argv) {
             th::app::launch_ranks(nproc, options, argc, argv, "transhuman-render", "runs/render"))
       return *code;
     const auto role = th::app::rank_role(options);
+    // The bake's destination is the lead's to write: checked before anything is written, and
+    // against the config's inputs (the data root) once it is read.
+    const std::string out_dir = options.out.empty() ? "runs/render" : options.out;
+    if (!bake_out.empty() && role.lead)
+      th::bake::check_bake_destination(bake_out, "--bake-out", {{"--out", out_dir}});
     const auto ctx =
         th::app::start_run(options, "transhuman-render", role.lead ? "runs/render" : "");
     th::app::share_cores(role, ctx);
     if (role.lead) th::app::print_summary(ctx, options.dry_run, model.checkpoint);
-    const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
-    if (options.dry_run) {  // the request too: person, frames, cameras, path file, memory
-      const auto plan = th::inference::plan_video(session, request);
-      spdlog::info("dry run: a video of {} frames of {} ({} body frame{}), {}x{}", plan.count,
-                   plan.human_name, plan.frames.size(), plan.frames.size() > 1 ? "s" : "",
-                   plan.width, plan.height);
-      return 0;
+    // The bake file whole, checked before the model is loaded.
+    std::optional<th::bake::BakedFrame> baked_file;
+    if (!bake_in.empty()) {
+      baked_file = th::bake::read_baked(
+          bake_in, th::resources::memory_limit_bytes(ctx.config.max_memory_gb));
+      if (*bake_voxel && baked_file->voxel != bake.voxel)
+        th::fail("--bake-voxel ", bake.voxel, ": baked frame '", bake_in.string(),
+                 "' has its own grid of ", baked_file->voxel, " m (leave --bake-voxel out)");
     }
+    if (!bake_out.empty() && role.lead) {
+      auto places = th::app::config_inputs(ctx.config, options.config);
+      places.insert(places.end(), options.inputs.begin(), options.inputs.end());
+      places.push_back({"--out", out_dir});
+      th::bake::check_bake_destination(bake_out, "--bake-out", places);
+    }
+    const th::inference::Session session(ctx.config, ctx.device, model.checkpoint);
+    std::optional<th::inference::VideoPlan> plan;
+    if (options.dry_run || baked) plan = th::inference::plan_video(session, request);
     std::unique_ptr<th::bake::BakedViews> views;
     if (baked) {
       views = std::make_unique<th::bake::BakedViews>(session, bake);
-      const auto plan = th::inference::plan_video(session, request);
-      if ((!bake_in.empty() || !bake_out.empty()) && plan.frames.size() != 1)
+      if ((!bake_in.empty() || !bake_out.empty()) && plan->frames.size() != 1)
         th::fail("--bake-in and --bake-out take one body frame; --frames names ",
-                 plan.frames.size());
-      if (!bake_in.empty()) views->use(th::bake::read_baked(bake_in));
-      const auto& b = views->bake(plan.prepared);
+                 plan->frames.size());
+      if (baked_file) views->use(std::move(*baked_file), plan->prepared);
+    }
+    if (options.dry_run) {  // the request too: person, frames, cameras, path file, memory, bake
+      if (baked && bake_in.empty())
+        th::bake::check_bake_memory(
+            th::bake::bake_box(plan->prepared.sample.body.bounds), bake, session,
+            fmt::format("{} frame {}", plan->human_name, plan->frames.front()));
+      spdlog::info("dry run: a video of {} frames of {} ({} body frame{}), {}x{}", plan->count,
+                   plan->human_name, plan->frames.size(), plan->frames.size() > 1 ? "s" : "",
+                   plan->width, plan->height);
+      return 0;
+    }
+    if (baked) {
+      const auto& b = views->bake(plan->prepared);
       if (bake_in.empty()) {
         const auto& r = views->last_report();
         spdlog::info(
@@ -112,7 +144,7 @@ int main(int argc, char** argv) {
             r.seconds.at("colour"), r.seconds.at("pack"), r.coarse_points, r.fine_points,
             r.color_points, b.stored_bricks(), b.bytes() / 1048576.0);
       }
-      if (!bake_out.empty()) {
+      if (!bake_out.empty() && role.lead) {
         th::bake::write_baked(b, bake_out);
         spdlog::info("bake: written to {}", bake_out.string());
       }
@@ -121,6 +153,7 @@ int main(int argc, char** argv) {
         return views->render(frame, camera, width, height);
       };
       request.renderer_id = views->id();
+      request.renderer_keys = views->request_keys();
     }
     const auto comm = th::app::join_ranks(role, ctx);
     const auto s = th::inference::render_video(session, request, ctx.run_dir, comm.get());

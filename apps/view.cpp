@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -13,6 +14,7 @@
 #include <thread>
 
 #include "app/app.hpp"
+#include "bake/bake.hpp"
 #include "core/error.hpp"
 #include "inference/session.hpp"
 #include "viewer/server.hpp"
@@ -102,7 +104,7 @@ int main(int argc, char** argv) {
     cli.add_flag("--no-bake", no_bake,
                  "do not bake frames: views while moving come from the network (small, slow)");
     cli.add_option("--bake-voxel", o.bake_voxel, "bake: grid spacing in metres")
-        ->check(CLI::Range(0.001, 0.2));
+        ->check(th::app::in_range(0.001, 0.2));
     if (const auto rc = th::app::parse_command_line(cli, argc, argv)) return *rc;
     for (const auto& name : o.allow_hosts) th::viewer::allowed_host(name);
     o.bake = !no_bake;
@@ -118,6 +120,29 @@ int main(int argc, char** argv) {
     if (o.start_frame >= first.num_frames())
       th::fail("--frame ", o.start_frame, ": ", first.name(), " has ", first.num_frames(),
                " frames");
+    if (o.bake) {
+      // A grid finer than memory allows is refused now, not when the first bake runs out of it:
+      // the largest box among each person's frame shown first.
+      th::bake::BakeOptions bake;
+      bake.voxel = o.bake_voxel;
+      std::array<double, 6> largest{};
+      std::string which;
+      double volume = -1;
+      for (int h = 0; h < int(session.dataset().humans().size()); ++h) {
+        const auto listed = session.setting_frames(h);
+        const int frame = h == o.start_human && o.start_frame >= 0 ? o.start_frame
+                          : listed.empty()                         ? 0
+                                                                   : listed.front();
+        const auto box =
+            th::bake::bake_box(session.dataset().load_body(session.human(h), frame).bounds);
+        const double v = (box[3] - box[0]) * (box[4] - box[1]) * (box[5] - box[2]);
+        if (v <= volume) continue;
+        volume = v;
+        largest = box;
+        which = session.human(h).name() + " frame " + std::to_string(frame);
+      }
+      th::bake::check_bake_memory(largest, bake, session, which);
+    }
     if (options.dry_run) return 0;
 
     th::viewer::Server server(session, o);

@@ -1,6 +1,7 @@
 #include "bake/bake.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <torch/torch.h>
 
 #include <chrono>
@@ -10,6 +11,7 @@
 
 namespace th::bake {
 namespace F = torch::nn::functional;
+namespace fs = std::filesystem;
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -30,6 +32,29 @@ torch::Tensor volume(const torch::Tensor& t) {
   return t.to(torch::kFloat32).unsqueeze(0).unsqueeze(0);
 }
 torch::Tensor unvolume(const torch::Tensor& t) { return t.squeeze(0).squeeze(0); }
+
+// The lattice over a frame's box: it covers the box as the rays see it (padded by 0.01,
+// data::near_far), in whole coarse cells.
+struct Lattice {
+  std::array<double, 3> origin{};
+  std::array<int64_t, 3> coarse_cells{}, cells{};
+};
+
+Lattice lattice_over(const std::array<double, 6>& box, const BakeOptions& options) {
+  const double h = options.voxel;
+  Lattice l;
+  for (int a = 0; a < 3; ++a) {
+    l.origin[a] = box[a] - 0.01;
+    const double extent = box[3 + a] - box[a] + 0.02;
+    l.coarse_cells[a] =
+        std::max<int64_t>(1, int64_t(std::ceil(extent / (h * options.coarse) - 1e-9)));
+    l.cells[a] = l.coarse_cells[a] * options.coarse;
+    if (l.cells[a] > 4096)
+      fail("--bake-voxel ", h, " m: the frame's box needs ", l.cells[a],
+           " cells along an axis, more than 4096; choose a larger voxel");
+  }
+  return l;
+}
 
 // Max over a (2r+1)^3 neighbourhood, same size.
 torch::Tensor dilate(const torch::Tensor& mask, int r) {
@@ -52,10 +77,59 @@ void check_options(const BakeOptions& o) {
   if (o.brick < 2 || o.brick > 32) fail("bake brick = ", o.brick, ": must be in [2, 32] cells");
 }
 
+std::array<double, 6> bake_box(const torch::Tensor& bounds) {
+  TORCH_CHECK(bounds.numel() == 6, "bake_box: bounds must be (2, 3)");
+  const auto b = bounds.to(torch::kFloat64).contiguous().view({2, 3});
+  std::array<double, 6> box{};
+  for (int a = 0; a < 3; ++a) {
+    box[a] = b[0][a].item<double>();
+    box[3 + a] = b[1][a].item<double>();
+  }
+  return box;
+}
+
+resources::Estimate bake_estimate(const std::array<double, 6>& box, const BakeOptions& options,
+                                  const inference::Session& session, const std::string& what) {
+  check_options(options);
+  const Lattice l = lattice_over(box, options);
+  double points = 1, coarse = 1, padded = 1;  // lattice points: fine, coarse, padded to bricks
+  for (int a = 0; a < 3; ++a) {
+    points *= double(l.cells[a] + 1);
+    coarse *= double(l.coarse_cells[a] + 1);
+    padded *= double((l.cells[a] + options.brick - 1) / options.brick * options.brick + 1);
+  }
+  // Dense grids bake_frame holds at its peak (the packing): masks (1 byte each: refined cells,
+  // refined points, positive, coloured), the fine density (4), the padded density (4) and its
+  // temporary (5), colour rows over the lattice and the padded one (8 + 8).
+  const double dense = points * (4 * 1 + 4 + 8) + padded * (4 + 5 + 8);
+  // Point lists near the body: fine points (24 bytes of index), coloured points (index,
+  // position, colour, row: 68) and the stored bricks' points while they are packed (about 80).
+  // On the demo checkpoint 30% of the lattice is fine or coloured and 60% lies in stored bricks
+  // (bench/results/bake.md, 1 cm): taken as 60% and all of the padded lattice.
+  const double near = 0.6 * points;
+  const double sparse = near * 24 + near * 68 + padded * 80;
+  resources::Estimate e;
+  e.what = fmt::format("bake of {} at --bake-voxel {} m (lattice {} x {} x {})", what,
+                       options.voxel, l.cells[0] + 1, l.cells[1] + 1, l.cells[2] + 1);
+  e.bytes = dense + sparse +
+            double(session.config().render.chunk_points) * resources::kBytesPerChunkPoint;
+  e.samples = coarse + near + 2 * near;  // a coloured point costs about two
+  e.threads = session.device().is_cpu() ? torch::get_num_threads() : 0;
+  return e;
+}
+
+void check_bake_memory(const std::array<double, 6>& box, const BakeOptions& options,
+                       const inference::Session& session, const std::string& what) {
+  resources::check(bake_estimate(box, options, session, what), session.config().max_memory_gb);
+}
+
 BakedFrame bake_frame(const inference::Session& session, const inference::PreparedFrame& frame,
                       const BakeOptions& options, BakeReport* report,
                       const BakeProgress& progress) {
   check_options(options);
+  const auto frame_box = bake_box(frame.sample.body.bounds);
+  check_bake_memory(frame_box, options, session,
+                    fmt::format("{} frame {}", frame.sample.human, frame.sample.frame));
   torch::NoGradGuard no_grad;
   BakeReport unused;
   BakeReport& rep = report ? *report : unused;
@@ -70,23 +144,11 @@ BakedFrame bake_frame(const inference::Session& session, const inference::Prepar
   out.voxel = h;
   out.brick = options.brick;
   out.cull_distance = session.config().render.cull_distance;
-  const auto box = frame.sample.body.bounds.to(torch::kFloat64).contiguous();
-  for (int a = 0; a < 3; ++a) {
-    out.box[a] = box[0][a].item<double>();
-    out.box[3 + a] = box[1][a].item<double>();
-  }
-  // The lattice covers the box as the rays see it (padded by 0.01, data::near_far), in whole
-  // coarse cells.
-  std::array<int64_t, 3> coarse_cells{};
-  for (int a = 0; a < 3; ++a) {
-    out.origin[a] = out.box[a] - 0.01;
-    const double extent = out.box[3 + a] - out.box[a] + 0.02;
-    coarse_cells[a] = std::max<int64_t>(1, int64_t(std::ceil(extent / (h * f) - 1e-9)));
-    out.cells[a] = coarse_cells[a] * f;
-    if (out.cells[a] > 4096)
-      fail("bake voxel = ", h, " m: the frame's box needs ", out.cells[a],
-           " cells along an axis, more than 4096; choose a larger voxel");
-  }
+  out.box = frame_box;
+  const Lattice lattice = lattice_over(out.box, options);
+  const auto coarse_cells = lattice.coarse_cells;
+  out.origin = lattice.origin;
+  out.cells = lattice.cells;
 
   // The network's work in chunks, with progress over the three stages' points.
   const int64_t chunk = std::max<int64_t>(1024, session.config().render.chunk_points);
@@ -233,16 +295,27 @@ BakedViews::BakedViews(const inference::Session& session, const BakeOptions& opt
   march_.termination = session.config().render.termination_transmittance;
 }
 
-void BakedViews::use(BakedFrame baked) {
+void BakedViews::use(BakedFrame baked, const inference::PreparedFrame& frame) {
+  const std::string where = "baked frame '" + baked.file + "'";
+  auto refuse = [&](const std::string& what, const auto& file, const auto& now) {
+    fail(where, " is a bake of ", what, " ", file, ", not ", now,
+         ": bake this one with --baked (and --bake-out to keep it)");
+  };
+  if (baked.human != frame.sample.human) refuse("person", baked.human, frame.sample.human);
+  if (baked.frame != frame.sample.frame)
+    refuse("frame", baked.frame, std::to_string(frame.sample.frame) + " (--frames)");
+  if (baked.reference_views != frame.sample.reference_views)
+    refuse("reference views", fmt::format("[{}]", fmt::join(baked.reference_views, ", ")),
+           fmt::format("[{}]", fmt::join(frame.sample.reference_views, ", ")));
   if (baked.checkpoint != session_.checkpoint_id())
-    fail("the baked frame of ", baked.human, " frame ", baked.frame, " was made by checkpoint ",
-         baked.checkpoint, ", not by ", session_.checkpoint_id(), ": bake it again");
+    fail(where, " was made by checkpoint ", baked.checkpoint, ", not by ", session_.checkpoint_id(),
+         ": bake it again");
   if (baked.cull_distance != session_.config().render.cull_distance)
-    fail("the baked frame of ", baked.human, " frame ", baked.frame,
-         " was made with render.cull_distance ", baked.cull_distance, ", not ",
+    fail(where, " was made with render.cull_distance ", baked.cull_distance, ", not ",
          session_.config().render.cull_distance);
   baked_ = std::move(baked);
   kept_ = true;
+  from_file_ = true;
 }
 
 const BakedFrame& BakedViews::bake(const inference::PreparedFrame& frame) {
@@ -252,6 +325,7 @@ const BakedFrame& BakedViews::bake(const inference::PreparedFrame& frame) {
   report_ = {};
   baked_ = bake_frame(session_, frame, options_, &report_);
   kept_ = true;
+  from_file_ = false;
   return baked_;
 }
 
@@ -260,9 +334,18 @@ torch::Tensor BakedViews::render(const inference::PreparedFrame& frame,
   return render_baked(bake(frame), camera.K, camera.R, camera.T, width, height, march_).rgb;
 }
 
-std::string BakedViews::id() const {
-  return fmt::format("baked (voxel {} m, coarse x{}, brick {})", options_.voxel, options_.coarse,
-                     options_.brick);
+std::string BakedViews::id() const { return "baked"; }
+
+std::vector<std::pair<std::string, std::string>> BakedViews::request_keys() const {
+  if (from_file_)
+    return {{"bake.source", fs::absolute(baked_.file).lexically_normal().string()},
+            {"bake.file", baked_.digest},
+            {"bake.voxel", fmt::format("{}", baked_.voxel)},
+            {"bake.brick", std::to_string(baked_.brick)}};
+  return {{"bake.source", "this run"},
+          {"bake.voxel", fmt::format("{}", options_.voxel)},
+          {"bake.coarse", std::to_string(options_.coarse)},
+          {"bake.brick", std::to_string(options_.brick)}};
 }
 
 }  // namespace th::bake

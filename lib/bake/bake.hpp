@@ -15,9 +15,12 @@
 #include <functional>
 #include <map>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "bake/baked_frame.hpp"
 #include "bake/march.hpp"
+#include "core/resources.hpp"
 #include "inference/session.hpp"
 #include "video/camera_path.hpp"
 
@@ -41,13 +44,28 @@ struct BakeReport {
 using BakeProgress = std::function<void(double)>;
 
 // Bakes `frame` of `session` (the session's device and precision). Throws th::Error for options
-// out of range (naming the option).
+// out of range (naming the option), or when its estimated peak memory (bake_estimate) is above
+// max_memory_gb, before anything is allocated.
 BakedFrame bake_frame(const inference::Session& session, const inference::PreparedFrame& frame,
                       const BakeOptions& options, BakeReport* report = nullptr,
                       const BakeProgress& progress = {});
 
 // Checks options (th::Error naming the one out of range).
 void check_options(const BakeOptions& options);
+
+// A frame's box (2, 3) (min; max corner, world) as bake_frame stores it: min x, y, z, max x, y, z.
+std::array<double, 6> bake_box(const torch::Tensor& bounds);
+
+// Peak memory of baking a frame whose box is `box` at `options` (METHOD 7.1's stages keep dense
+// grids over the whole lattice, and lists of the points near the body), and the network samples
+// it asks for; `what` names the frame. Its text names --bake-voxel. Throws th::Error naming
+// --bake-voxel when the lattice needs more than 4096 cells along an axis.
+resources::Estimate bake_estimate(const std::array<double, 6>& box, const BakeOptions& options,
+                                  const inference::Session& session, const std::string& what);
+// bake_estimate checked against the session's max_memory_gb: th::Error naming --bake-voxel and
+// max_memory_gb when it is above.
+void check_bake_memory(const std::array<double, 6>& box, const BakeOptions& options,
+                       const inference::Session& session, const std::string& what);
 
 // Views of a session's prepared frames rendered from their bakes: a frame is baked when first
 // asked for (the last one is kept), or taken from a file given with use().
@@ -56,16 +74,21 @@ class BakedViews {
   // The march takes the session's render.samples and render.termination_transmittance.
   BakedViews(const inference::Session& session, const BakeOptions& options);
 
-  // `baked` serves as the bake of its person and frame (a file read with read_baked): th::Error
-  // when it was made by another checkpoint or another culling distance.
-  void use(BakedFrame baked);
+  // `baked` (a file read with read_baked) serves as the bake of `frame`: th::Error naming its
+  // file when it was made of another person, frame or reference views, by another checkpoint or
+  // with another culling distance.
+  void use(BakedFrame baked, const inference::PreparedFrame& frame);
   // The bake of `frame`, made now unless kept.
   const BakedFrame& bake(const inference::PreparedFrame& frame);
   // (H, W, 3) float32 RGB in [0, 1], as Session::render.
   torch::Tensor render(const inference::PreparedFrame& frame, const video::PathCamera& camera,
                        int width, int height);
-  // What a video made with it records as its renderer: voxel, coarse factor, brick.
+  // What a video made with it records as its renderer ("baked"), and what it renders from, key by
+  // key: the bake's voxel and brick and where it came from (bake.source: "this run" with its
+  // coarse factor, or the file given to use() with its size and digest). request.yaml holds both,
+  // so frames of one bake are never resumed under another.
   std::string id() const;
+  std::vector<std::pair<std::string, std::string>> request_keys() const;
   const BakeReport& last_report() const { return report_; }
   const MarchOptions& march() const { return march_; }
 
@@ -74,6 +97,7 @@ class BakedViews {
   BakeOptions options_;
   MarchOptions march_;
   bool kept_ = false;
+  bool from_file_ = false;  // baked_ came from use()
   BakedFrame baked_;
   BakeReport report_;
 };

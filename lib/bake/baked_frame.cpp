@@ -1,10 +1,14 @@
 #include "bake/baked_frame.hpp"
 
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <nlohmann/json.hpp>
-#include <sstream>
 
 #include "core/error.hpp"
 #include "core/files.hpp"
@@ -21,17 +25,70 @@ constexpr uint32_t kVersion = 1;
 // far beyond any body; the bounds keep a corrupt header from asking for absurd allocations).
 constexpr int64_t kMaxCells = 4096;
 constexpr int kMaxBrick = 64;
+// Longest header a file may declare: its JSON names a person, a checkpoint path and a few
+// numbers (a few hundred bytes).
+constexpr uint32_t kMaxHeader = uint32_t{1} << 20;
 
 template <class T>
 void append(std::string& out, const std::vector<T>& v) {
   out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
 }
 
-template <class T>
-void take(const std::string& bytes, size_t& at, std::vector<T>& v, size_t count) {
-  v.resize(count);
-  std::memcpy(v.data(), bytes.data() + at, count * sizeof(T));
-  at += count * sizeof(T);
+// A regular file opened for reading, never a FIFO or a device (fstat on the open descriptor:
+// nothing can be swapped in between the check and the read).
+class ReadFile {
+ public:
+  ReadFile(const fs::path& path, const std::string& where) : where_(where) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+    if (fd_ < 0) fail(where, ": cannot open it (", std::strerror(errno), ")");
+    struct stat st {};
+    if (::fstat(fd_, &st) != 0 || !S_ISREG(st.st_mode)) {
+      const auto type = S_ISFIFO(st.st_mode)   ? fs::file_type::fifo
+                        : S_ISCHR(st.st_mode)  ? fs::file_type::character
+                        : S_ISBLK(st.st_mode)  ? fs::file_type::block
+                        : S_ISDIR(st.st_mode)  ? fs::file_type::directory
+                        : S_ISSOCK(st.st_mode) ? fs::file_type::socket
+                                               : fs::file_type::unknown;
+      ::close(fd_);
+      fail(where, " is a ", file_kind(type), ", not a file");
+    }
+    size_ = uint64_t(st.st_size);
+  }
+  ~ReadFile() { ::close(fd_); }
+  ReadFile(const ReadFile&) = delete;
+  ReadFile& operator=(const ReadFile&) = delete;
+
+  uint64_t size() const { return size_; }
+  // Reads `count` bytes at `at` into `out`.
+  void read(uint64_t at, void* out, uint64_t count) const {
+    auto* p = static_cast<char*>(out);
+    while (count > 0) {
+      const ssize_t n = ::pread(fd_, p, count, off_t(at));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) fail(where_, ": cannot read it (", n < 0 ? std::strerror(errno) : "shorter", ")");
+      p += n;
+      at += uint64_t(n);
+      count -= uint64_t(n);
+    }
+  }
+  template <class T>
+  void read(uint64_t& at, std::vector<T>& v, uint64_t count) const {
+    v.resize(count);
+    read(at, v.data(), count * sizeof(T));
+    at += count * sizeof(T);
+  }
+
+ private:
+  std::string where_;
+  int fd_ = -1;
+  uint64_t size_ = 0;
+};
+
+// FNV-1a, 64 bits, over `bytes` continuing from `hash`: which bake a render used.
+uint64_t fnv1a(const void* bytes, size_t size, uint64_t hash = 14695981039346656037ull) {
+  const auto* p = static_cast<const unsigned char*>(bytes);
+  for (size_t i = 0; i < size; ++i) hash = (hash ^ p[i]) * 1099511628211ull;
+  return hash;
 }
 
 }  // namespace
@@ -52,6 +109,9 @@ int64_t BakedFrame::bytes() const {
 }
 
 void write_baked(const BakedFrame& f, const fs::path& path) {
+  const std::string where = "bake file '" + path.string() + "'";
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(path, ec))) fail(where, " exists: name a new file");
   Json header{{"format", "transhuman baked frame"},
               {"version", kVersion},
               {"little_endian", true},
@@ -76,29 +136,50 @@ void write_baked(const BakedFrame& f, const fs::path& path) {
   append(out, f.slot);
   append(out, f.density);
   append(out, f.color);
-  write_file_atomic(path, out);
+  // Written complete beside it, then linked to its name: link() makes the name only where none
+  // is, so of two writers of one new file the second is refused, not written over the first.
+  const fs::path tmp = create_temporary_beside(path);
+  auto discard = [&] { fs::remove(tmp, ec); };
+  try {
+    write_file_atomic(tmp, out);
+  } catch (...) {
+    discard();
+    throw;
+  }
+  const int linked = ::link(tmp.c_str(), path.c_str());
+  const int err = errno;
+  discard();
+  if (linked != 0 && err == EEXIST)
+    fail(where,
+         " appeared while this bake was written (another command wrote it): "
+         "its contents are that command's; name a new file");
+  if (linked != 0) fail("cannot write ", where, ": ", std::strerror(err));
 }
 
-BakedFrame read_baked(const fs::path& path) {
+BakedFrame read_baked(const fs::path& path, double max_bytes) {
   const std::string where = "baked frame '" + path.string() + "'";
-  std::ifstream in(path, std::ios::binary);
-  if (!in) fail(where, ": cannot open it");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string bytes = ss.str();
-  if (bytes.size() < 16 || std::memcmp(bytes.data(), kMagic, sizeof(kMagic)) != 0)
+  refuse_special_file(path, "baked frame");
+  const ReadFile in(path, where);
+  const uint64_t size = in.size();
+  char head[16] = {};
+  if (size >= 16) in.read(0, head, 16);
+  if (size < 16 || std::memcmp(head, kMagic, sizeof(kMagic)) != 0)
     fail(where,
          ": not a baked frame (no THBAKED header; write one with transhuman-render "
          "--bake-out)");
   uint32_t version = 0, length = 0;
-  std::memcpy(&version, bytes.data() + 8, 4);
-  std::memcpy(&length, bytes.data() + 12, 4);
+  std::memcpy(&version, head + 8, 4);
+  std::memcpy(&length, head + 12, 4);
   if (version != kVersion)
     fail(where, ": format version ", version, ", this build reads version ", kVersion);
-  if (16 + size_t(length) > bytes.size()) fail(where, ": truncated inside its header");
+  if (length > kMaxHeader)
+    fail(where, ": a header of ", length, " bytes, more than a baked frame's (", kMaxHeader, ")");
+  if (16 + uint64_t(length) > size) fail(where, ": truncated inside its header");
+  std::string text(length, '\0');
+  in.read(16, text.data(), length);
   Json h;
   try {
-    h = Json::parse(bytes.substr(16, length));
+    h = Json::parse(text);
   } catch (const Json::exception& e) {
     fail(where, ": unreadable header (", e.what(), ")");
   }
@@ -137,16 +218,22 @@ BakedFrame read_baked(const fs::path& path) {
   const int64_t stored = h.value("stored_bricks", int64_t(-1));
   if (stored < 0 || stored > bricks)
     fail(where, ": header key 'stored_bricks' = ", stored, " outside [0, ", bricks, "]");
+  // Every size against the file's length and the memory bound before an array is allocated.
   const int64_t p = f.points_per_brick();
-  const size_t expected =
-      16 + size_t(length) + size_t(bricks) * 4 + size_t(stored * p) * 4 * (1 + kColorDims);
-  if (bytes.size() != expected)
-    fail(where, ": ", bytes.size(), " bytes, its header describes ", expected,
+  const uint64_t arrays =
+      uint64_t(bricks) * 4 + uint64_t(stored) * uint64_t(p) * 4 * (1 + kColorDims);
+  const uint64_t expected = 16 + uint64_t(length) + arrays;
+  if (size != expected)
+    fail(where, ": ", size, " bytes, its header describes ", expected,
          " (truncated or not written by write_baked)");
-  size_t at = 16 + length;
-  take(bytes, at, f.slot, size_t(bricks));
-  take(bytes, at, f.density, size_t(stored * p));
-  take(bytes, at, f.color, size_t(stored * p * kColorDims));
+  if (max_bytes > 0 && double(arrays) > max_bytes)
+    fail(where, ": its arrays take ", fmt::format("{:.1f}", double(arrays) / 1073741824.0),
+         " GiB, above the memory limit of ", fmt::format("{:.1f}", max_bytes / 1073741824.0),
+         " GiB (max_memory_gb)");
+  uint64_t at = 16 + length;
+  in.read(at, f.slot, uint64_t(bricks));
+  in.read(at, f.density, uint64_t(stored * p));
+  in.read(at, f.color, uint64_t(stored * p * kColorDims));
   std::vector<char> used(size_t(stored), 0);
   for (int32_t s : f.slot) {
     if (s == -1) continue;
@@ -158,7 +245,31 @@ BakedFrame read_baked(const fs::path& path) {
   for (const auto* v : {&f.density, &f.color})
     for (float x : *v)
       if (!std::isfinite(x)) fail(where, ": holds a value that is not finite");
+  uint64_t hash = fnv1a(head, 16);
+  hash = fnv1a(text.data(), text.size(), hash);
+  hash = fnv1a(f.slot.data(), f.slot.size() * sizeof(int32_t), hash);
+  hash = fnv1a(f.density.data(), f.density.size() * sizeof(float), hash);
+  hash = fnv1a(f.color.data(), f.color.size() * sizeof(float), hash);
+  f.file = path.string();
+  f.digest = fmt::format("{} bytes, FNV-1a 64 {:016x}", size, hash);
   return f;
+}
+
+void check_bake_destination(const fs::path& path, const std::string& option,
+                            const std::vector<std::pair<std::string, std::string>>& places) {
+  const std::string where = option + " '" + path.string() + "'";
+  std::error_code ec;
+  if (fs::exists(fs::symlink_status(path, ec))) fail(where, " exists: name a new file");
+  for (const auto& [what, place] : places) {
+    if (place.empty()) continue;
+    if (path_within(path, place) || path_within_as_given(path, place))
+      fail(where, " lies in ", what, " '", place, "': write the bake outside it");
+  }
+  const fs::path folder = fs::absolute(path).parent_path();
+  if (!fs::is_directory(folder, ec))
+    fail(where, ": its folder '", folder.string(), "' ",
+         fs::exists(folder, ec) ? "is not a folder" : "does not exist",
+         " (it is checked before the bake, which is written last)");
 }
 
 }  // namespace th::bake

@@ -17,6 +17,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace th::bake {
@@ -46,19 +47,34 @@ struct BakedFrame {
   std::vector<float> density;
   std::vector<float> color;
 
+  // Where it was read from (read_baked): the file as named, and its size and content digest
+  // ("<n> bytes, FNV-1a 64 <hex>"), which a render's request.yaml records. Empty for a bake
+  // made in this process.
+  std::string file;
+  std::string digest;
+
   std::array<int64_t, 3> bricks() const;  // bricks per axis: ceil(cells / brick)
   int64_t points_per_brick() const { return int64_t(brick + 1) * (brick + 1) * (brick + 1); }
   int64_t stored_bricks() const;
   int64_t bytes() const;  // of the grid in memory (what a file holds, header aside)
 };
 
-// Writes `frame` to `path` (binary: a versioned header, then the arrays; atomically: a partial
-// file never replaces a complete one). Throws th::Error naming the file when it cannot.
+// Writes `frame` to the new file `path` (binary: a versioned header, then the arrays). The file
+// appears complete or not at all, and only where nothing was: th::Error naming it when it exists,
+// or when another writer made it while this one wrote (of two writers, one wins).
 void write_baked(const BakedFrame& frame, const std::filesystem::path& path);
 
-// Reads and checks a file written by write_baked: its format and version, every size against
-// the file's length, slots in range and unique, finite values. Throws th::Error naming the file
-// and what is wrong.
-BakedFrame read_baked(const std::filesystem::path& path);
+// Reads and checks a file written by write_baked: a regular file (a FIFO or a device is refused
+// before it is opened), its format and version, the header's length (1 MiB at most) and every
+// size against the file's length before the arrays are read, slots in range and unique, finite
+// values. With `max_bytes` > 0, arrays of more bytes are refused before they are allocated.
+// Throws th::Error naming the file and what is wrong.
+BakedFrame read_baked(const std::filesystem::path& path, double max_bytes = 0);
+
+// Checks that `path` can take a new bake file before any work is done: it does not exist, its
+// folder does, and it lies in none of `places` (what, path: a run folder, the data root) nor is
+// one of them (an input file). Throws th::Error naming `option` ("--bake-out") and the path.
+void check_bake_destination(const std::filesystem::path& path, const std::string& option,
+                            const std::vector<std::pair<std::string, std::string>>& places);
 
 }  // namespace th::bake

@@ -4,6 +4,7 @@
 #include <torch/torch.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <optional>
@@ -127,7 +128,10 @@ std::string describe(const Session& session, const VideoRequest& r, const std::s
   y << YAML::Key << "width" << YAML::Value << width << YAML::Key << "height" << YAML::Value
     << height;
   y << YAML::Key << "video_frames" << YAML::Value << count;
-  if (r.renderer) y << YAML::Key << "renderer" << YAML::Value << r.renderer_id;
+  if (r.renderer) {
+    y << YAML::Key << "renderer" << YAML::Value << r.renderer_id;
+    for (const auto& [key, value] : r.renderer_keys) y << YAML::Key << key << YAML::Value << value;
+  }
   y << YAML::Key << "settings" << YAML::Value << YAML::BeginMap;
   y << YAML::Key << "precision" << YAML::Value
     << model::resolve_products(c.precision, c.fp32_products, session.device()).describe();
@@ -168,6 +172,9 @@ std::string request_differences(const std::string& before, const std::string& no
   }
   for (const auto& [key, value] : old_keys)
     if (!new_keys.count(key)) named.push_back(name(key) + " (frames: " + value + ", now: not set)");
+  // Another renderer first: the bake keys that come and go with it say less.
+  std::stable_partition(named.begin(), named.end(),
+                        [](const std::string& n) { return n.rfind("renderer ", 0) == 0; });
   std::string text;
   for (size_t i = 0; i < named.size() && i < 4; ++i) text += (i ? ", " : "") + named[i];
   if (named.size() > 4) text += " and " + std::to_string(named.size() - 4) + " more";

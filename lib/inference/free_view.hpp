@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "inference/session.hpp"
@@ -33,10 +34,12 @@ struct VideoRequest {
   bool force = false;               // discard frames of an earlier, different request
   int contact_sheet_frames = 12;    // 0: no contact sheet
   // Another renderer in place of Session::render (a baked one, METHOD 7.1): (H, W, 3) float32
-  // RGB in [0, 1]. `renderer_id` says what it is and how it is set up; request.yaml records it,
-  // so frames of one renderer are never resumed by another.
+  // RGB in [0, 1]. `renderer_id` says what it is, `renderer_keys` (key, value) what it renders
+  // from (a bake's voxel, brick and identity); request.yaml records both, so frames of one
+  // renderer, or of one bake, are never resumed by another.
   std::function<torch::Tensor(const PreparedFrame&, const video::PathCamera&, int, int)> renderer;
   std::string renderer_id;
+  std::vector<std::pair<std::string, std::string>> renderer_keys;
 };
 
 struct VideoSummary {

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # transhuman-render --baked (METHOD 7.1) on the trained tiny checkpoint: a baked orbit is written,
 # its bake saved with --bake-out; --bake-in of that file renders the same frames byte for byte
-# without baking; the exact orbit's request is not resumed by a baked one (request.yaml differs);
+# without baking; request.yaml records the bake (its voxel, or the file and its digest); the
+# exact orbit's request is not resumed by a baked one (request.yaml differs);
 # a damaged bake file, or one naming another checkpoint, is refused with exit 2 naming it.
 #
 #   tests/apps/check_baked.sh APPS_DIR TINY_DATASET CHECKPOINT
@@ -21,9 +22,12 @@ fail() { echo "check_baked: FAIL: $*" >&2; exit 1; }
 grep -q "bake: .* frame .* in .* s" "$work/a.log" || fail "the bake's time is not logged"
 [[ -s "$work/frame.thbake" ]] || fail "--bake-out wrote nothing"
 grep -q "renderer: baked" "$work/a/request.yaml" || fail "request.yaml does not record the baked renderer"
+grep -q "bake.voxel: 0.04" "$work/a/request.yaml" || fail "request.yaml does not record the bake's voxel"
 "$render" "${common[@]}" --bake-in "$work/frame.thbake" --bake-voxel 0.04 --out "$work/b" > "$work/b.log" 2>&1 ||
   { cat "$work/b.log"; fail "render --bake-in"; }
 if grep -q "bake: .* frame .* in .* s" "$work/b.log"; then fail "--bake-in baked again"; fi
+grep -q "bake.source: $work/frame.thbake" "$work/b/request.yaml" || fail "request.yaml does not record the bake file"
+grep -q "bake.file: .* bytes, FNV-1a 64 " "$work/b/request.yaml" || fail "request.yaml does not record the bake file's digest"
 for f in "$work/a/frames/"*.png; do cmp "$f" "$work/b/frames/$(basename "$f")" || fail "frame $(basename "$f") differs"; done
 echo "baked orbit: $(ls "$work/a/frames" | wc -l) frames identical from the bake and from its file ($(stat -c %s "$work/frame.thbake") bytes)"
 

@@ -1,5 +1,6 @@
 // Baked frames (METHOD 7.1): the file, the ray march against the exact renderer, the bake against
 // the network, and the viewer's frame caches.
+#include <sys/stat.h>
 #include <torch/torch.h>
 #include <unistd.h>
 
@@ -175,6 +176,39 @@ TEST_CASE("a baked frame survives its file, and a damaged file is refused naming
   std::memcpy(&nan[bytes.size() - 4], &bad, 4);
   refused(damaged("nan.thbake", nan), "not finite");
   refused(dir / "missing.thbake", "cannot open");
+  // A header longer than any bake's, and arrays above a memory bound, before they are read.
+  std::string long_header = bytes;
+  const uint32_t huge = uint32_t{1} << 30;
+  std::memcpy(&long_header[12], &huge, 4);
+  refused(damaged("long_header.thbake", long_header), "more than a baked frame's");
+  CHECK_THROWS_WITH(th::bake::read_baked(file, 16.0),
+                    Catch::Contains(file.string()) && Catch::Contains("max_memory_gb"));
+  // What is not a file is refused without being opened for long: a FIFO would block a read.
+  const fs::path fifo = dir / "fifo.thbake";
+  REQUIRE(::mkfifo(fifo.c_str(), 0600) == 0);
+  refused(fifo, "FIFO");
+  CHECK_THROWS_WITH(th::bake::read_baked("/dev/zero"), Catch::Contains("character device"));
+  // A bake file is a new file: never written over one, nor where another appeared.
+  CHECK_THROWS_WITH(th::bake::write_baked(grid, file), Catch::Contains("exists"));
+  CHECK(th::bake::read_baked(file).density == grid.density);
+}
+
+TEST_CASE("a bake's destination is checked before the bake", "[bake]") {
+  const fs::path dir = th::test::scratch_dir("bake_out_" + std::to_string(::getpid()));
+  fs::create_directories(dir / "out");
+  fs::create_directories(dir / "data");
+  const std::vector<std::pair<std::string, std::string>> places{
+      {"--out", (dir / "out").string()}, {"the data root (data.root)", (dir / "data").string()}};
+  const auto refused = [&](const fs::path& p, const std::string& why) {
+    CHECK_THROWS_WITH(th::bake::check_bake_destination(p, "--bake-out", places),
+                      Catch::Contains("--bake-out '" + p.string() + "'") && Catch::Contains(why));
+  };
+  th::bake::check_bake_destination(dir / "new.thbake", "--bake-out", places);
+  refused(dir / "missing" / "f.thbake", "does not exist");
+  refused(dir / "out" / "config.yaml", "lies in --out");
+  refused(dir / "data" / "f.thbake", "lies in the data root (data.root)");
+  std::ofstream(dir / "taken.thbake") << "x";
+  refused(dir / "taken.thbake", "exists");
 }
 
 TEST_CASE("a bake holds the network's density and colour at its lattice points", "[bake]") {
@@ -182,8 +216,9 @@ TEST_CASE("a bake holds the network's density and colour at its lattice points",
   th::train::train(th::test::tiny_train_config({"train.val_views=0", "eval.setting=identity"}),
                    torch::kCPU, {run, false, 2});
   const th::inference::Session session(
-      th::test::tiny_train_config({"train.val_views=0", "eval.setting=identity"}), torch::kCPU,
-      run / "checkpoints" / "latest.pt");
+      th::test::tiny_train_config(
+          {"train.val_views=0", "eval.setting=identity", "max_memory_gb=2"}),
+      torch::kCPU, run / "checkpoints" / "latest.pt");
   const auto frame = session.prepare(0, session.setting_frames(0).front(), 0);
   th::bake::BakeOptions options;
   options.voxel = 0.05;
@@ -239,6 +274,29 @@ TEST_CASE("a bake holds the network's density and colour at its lattice points",
   const auto direct =
       th::bake::render_baked(views.bake(frame), cam.K, cam.R, cam.T, 32, 24, views.march());
   CHECK(torch::equal(image, direct.rgb));
+
+  // The lattice over a box, counted by hand: extents padded by 0.01 on each side (0.12, 0.22,
+  // 0.32 m) in whole coarse cells of 2 cm, 6, 11 and 16, so 12, 22 and 32 cells of 1 cm.
+  th::bake::BakeOptions fine;
+  fine.voxel = 0.01;
+  const std::array<double, 6> box{0, 0, 0, 0.1, 0.2, 0.3};
+  const auto e = th::bake::bake_estimate(box, fine, session, "a box");
+  CHECK_THAT(e.what, Catch::Contains("--bake-voxel 0.01 m (lattice 13 x 23 x 33)"));
+  fine.voxel = 0.005;
+  const double chunk =
+      double(session.config().render.chunk_points) * th::resources::kBytesPerChunkPoint;
+  const double ratio =
+      (th::bake::bake_estimate(box, fine, session, "a box").bytes - chunk) / (e.bytes - chunk);
+  // Between the growth of the lattice padded to bricks of 8, 25 x 49 x 65 / (17 x 25 x 33) = 5.7,
+  // and of the lattice itself, 25 x 45 x 65 / (13 x 23 x 33) = 7.4.
+  CHECK(ratio > 5.6);
+  CHECK(ratio < 7.5);
+  // A millimetre grid over the frame's box is refused before anything is allocated.
+  fine.voxel = 0.001;
+  CHECK_THROWS_WITH(th::bake::bake_frame(session, frame, fine),
+                    Catch::Contains("--bake-voxel 0.001 m") &&
+                        Catch::Contains("estimated peak memory") &&
+                        Catch::Contains("max_memory_gb=2"));
 }
 
 TEST_CASE("the viewer's frame caches evict the least recently used frame", "[viewer]") {
