@@ -52,12 +52,20 @@ int main(int argc, char** argv) {
 
     const auto role = th::app::rank_role(options);
     const bool lead = role.lead;
-    if (lead && !options.dry_run) options.preflight = th::app::load_first_training_sample;
+    // --init is read whole before the run folder is written (a dry run reads it too).
+    if (lead && !options.dry_run)
+      options.preflight = [&init_from](const th::Config& config) {
+        if (!init_from.empty()) th::train::check_init(config, init_from);
+        th::app::load_first_training_sample(config);
+      };
     const auto ctx = th::app::start_run(options, "transhuman-train",
                                         options.dry_run || !lead ? "" : "runs/train");
     th::app::share_cores(role, ctx);
     if (lead) th::app::print_summary(ctx, options.dry_run);
-    if (options.dry_run) return 0;
+    if (options.dry_run) {
+      if (!init_from.empty()) th::train::check_init(ctx.config, init_from);
+      return 0;
+    }
 
     th::train::TrainOptions train_options{ctx.run_dir, resume, max_steps};
     train_options.init_from = init_from;

@@ -21,6 +21,7 @@
 #include "io/files.hpp"
 #include "metrics/lpips.hpp"
 #include "model/encoder.hpp"
+#include "pipeline/checked_load.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/jsonl.hpp"
 #include "pipeline/pipeline.hpp"
@@ -376,6 +377,35 @@ void Run::finish(int epoch) {
 }
 
 }  // namespace
+
+namespace {
+
+// True when `path` is a checkpoint as this project writes it (a LibTorch archive with a model).
+bool ours(const fs::path& path) {
+  try {
+    pipeline::check_checkpoint_archive(path);
+    torch::serialize::InputArchive root, model;
+    root.load_from(path.string());
+    return root.try_read("model", model);
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+}  // namespace
+
+void check_init(const Config& config, const fs::path& checkpoint) {
+  torch::NoGradGuard no_grad;
+  model::TransHuman model(config.model);
+  try {
+    pipeline::load_weights(*model, checkpoint);
+  } catch (const Error& e) {
+    if (checkpoint.extension() == ".pth" && ours(checkpoint))
+      fail(e.what(), " (a .pth is read as the reference's checkpoint; this file is one of ours, ",
+           "written by transhuman-train: name it .pt)");
+    throw;
+  }
+}
 
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options) {
   return Run(config, device, options).go();

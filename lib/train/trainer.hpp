@@ -44,6 +44,11 @@ struct TrainSummary {
   std::filesystem::path checkpoint;  // the latest checkpoint written
 };
 
+// Checks a fine-tuning start (--init) before a run is written: its weights are read into the
+// model of `config` as train() reads them (every tensor, name and shape checked). th::Error naming
+// the file; a checkpoint of ours named .pth (read as the reference's) is said to be one.
+void check_init(const Config& config, const std::filesystem::path& checkpoint);
+
 // Trains with `config` on `device`. Throws th::Error for bad input (missing data, NaN loss with
 // the step and the last good checkpoint named).
 TrainSummary train(const Config& config, const torch::Device& device, const TrainOptions& options);
