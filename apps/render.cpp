@@ -38,7 +38,9 @@ int main(int argc, char** argv) {
                       ->check(th::app::at_least(1));
     auto* path =
         cli.add_option("--path", request.path_file, "camera path file (YAML/JSON, see README)");
-    auto* camera = cli.add_option("--camera", request.camera, "render from this dataset camera");
+    auto* camera =
+        cli.add_option("--camera", request.camera,
+                       "render from this dataset camera (its name or calibration index)");
     orbit->excludes(path)->excludes(camera);
     path->excludes(camera);
     cli.add_option("--view", request.view,

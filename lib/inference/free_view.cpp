@@ -199,9 +199,14 @@ VideoPlan plan_video(const Session& session, const VideoRequest& request) {
 
   // The camera whose image the output is modelled on: its K (at data.ratio) and size.
   using Cameras = VideoRequest::Cameras;
-  const int base_view = request.cameras == Cameras::Dataset ? request.camera : request.view;
+  const int base_view = request.cameras == Cameras::Dataset
+                            ? data::camera_index(human, request.camera, "--camera")
+                            : request.view;
   if (base_view < 0 || base_view >= human.num_cameras())
     fail(human.name(), ": camera ", base_view, " out of range [0, ", human.num_cameras(), ")");
+  spdlog::info("{}: camera '{}' (index {}){}", human.name(), human.camera_name(base_view),
+               base_view,
+               request.cameras == Cameras::Dataset ? "" : ": the orbit's intrinsics and size");
   PreparedFrame prepared = session.prepare(h, frames.front(), base_view);
   const int src_w = int(prepared.sample.target_image.size(1)),
             src_h = int(prepared.sample.target_image.size(0));

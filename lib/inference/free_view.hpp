@@ -28,7 +28,7 @@ struct VideoRequest {
   enum class Cameras { Orbit, PathFile, Dataset } cameras = Cameras::Orbit;
   int orbit_views = 0;              // orbit cameras; 0: 36, or one per frame of a frame range
   std::filesystem::path path_file;  // Cameras::PathFile
-  int camera = 0;                   // Cameras::Dataset: camera index
+  std::string camera;               // Cameras::Dataset: the camera's name or calibration index
   int view = 3;                     // the orbit's intrinsics and image size (METHOD 7: view 3)
   int width = 0, height = 0;        // output size; 0: the view's image at data.ratio (K scaled)
   bool force = false;               // discard frames of an earlier, different request

@@ -183,6 +183,7 @@ Run::Run(const Config& config, const torch::Device& device, const TrainOptions& 
   if (tc_.val_views > 0 && lead_)
     val_set_ = std::make_shared<const data::Dataset>(config.data, config.data.test_setting,
                                                      data::Dataset::Mode::Test, smpl);
+  if (val_set_) val_set_->require_targets();
 
   torch::manual_seed(uint64_t(config.seed));
   model_ = model::TransHuman(config.model);

@@ -244,7 +244,7 @@ TEST_CASE("bad render requests name the person, frame or camera", "[inference][v
   CHECK_THROWS_WITH(th::inference::render_video(session, r, out), Catch::Contains("frame 999"));
   r.frames = {};
   r.cameras = VideoRequest::Cameras::Dataset;
-  r.camera = 99;
+  r.camera = "99";
   CHECK_THROWS_WITH(th::inference::render_video(session, r, out), Catch::Contains("camera 99"));
 }
 
