@@ -272,9 +272,9 @@ void add_model_options(CLI::App& cli, ModelOptions& m) {
       "--setting", m.setting,
       "split setting (pose, identity, one_shot, cross_dataset, fitting); default eval.setting");
   cli.add_option(
-      "--reference-views", m.reference_views,
-      "reference cameras, comma-separated names or calibration indices (data.reference_views); "
-      "default: the split's, or without a split the most evenly spread")
+         "--reference-views", m.reference_views,
+         "reference cameras, comma-separated names or calibration indices (data.reference_views); "
+         "default: the split's, or without a split the most evenly spread")
       ->each([&m](const std::string&) { m.reference_views_given = true; });
 }
 

@@ -89,9 +89,9 @@ int lock_run_dir(const std::filesystem::path& dir, const std::string& app_name);
 // What the commands that use a trained model share (eval, render, mesh): the checkpoint and
 // the split setting whose people and reference views they use.
 struct ModelOptions {
-  std::string checkpoint;       // ours (.pt) or the reference's (.pth)
-  std::string setting;          // overrides eval.setting when set
-  std::string reference_views;  // "a,b,c": overrides data.reference_views when given
+  std::string checkpoint;              // ours (.pt) or the reference's (.pth)
+  std::string setting;                 // overrides eval.setting when set
+  std::string reference_views;         // "a,b,c": overrides data.reference_views when given
   bool reference_views_given = false;  // given, even as '' (refused)
 };
 

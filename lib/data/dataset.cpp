@@ -153,10 +153,11 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
                : split + ": num_reference_views " + std::to_string(setting_.num_reference_views),
            ": ", range.name, " has only ", human->num_cameras(), " cameras");
     if (setting_.random_references && !config.reference_views.empty()) {
-      const std::string message = "data.reference_views (--reference-views) fixes the reference "
-                                  "cameras, but " + split + " draws " +
-                                  std::to_string(setting_.num_reference_views) +
-                                  " at random per sample";
+      const std::string message =
+          "data.reference_views (--reference-views) fixes the reference "
+          "cameras, but " +
+          split + " draws " + std::to_string(setting_.num_reference_views) +
+          " at random per sample";
       // Training shares its config with evaluation, whose settings have fixed references.
       if (mode != Mode::Train) fail(message, ": use a setting with fixed references");
       warn_once(message + ": data.reference_views applies to evaluation only");
@@ -289,8 +290,8 @@ Sample Dataset::load_item(const Item& it, uint64_t seed) const {
       fail("reference view ", image_of(v), ": its mask ", files,
            " marks no person pixel (non-zero pixels mark the person)");
     }
-    if (!images.empty() && (images.front().size(1) != view.rgb.rows ||
-                            images.front().size(2) != view.rgb.cols))
+    if (!images.empty() &&
+        (images.front().size(1) != view.rgb.rows || images.front().size(2) != view.rgb.cols))
       fail("reference view ", image_of(v), " is ", view.rgb.cols, "x", view.rgb.rows,
            " at data.ratio ", config_.ratio, " but reference view ",
            image_of(s.reference_views.front()), " is ", images.front().size(2), "x",

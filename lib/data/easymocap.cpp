@@ -381,8 +381,8 @@ BodyParams EasyMocapSequence::load_params(int frame) const {
     const auto& p = people[i];
     if (!p.is_object())
       fail("'", file.string(), "': person [", i, "] is ", p.type_name(), ", not an object");
-    const int64_t id = p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>()
-                                                                         : int64_t(i);
+    const int64_t id =
+        p.contains("id") && p["id"].is_number_integer() ? p["id"].get<int64_t>() : int64_t(i);
     if (std::find(ids.begin(), ids.end(), id) != ids.end())
       fail("'", file.string(), "': people [", std::find(ids.begin(), ids.end(), id) - ids.begin(),
            "] and [", i, "] have the same id ", id, " (which one data.person_id means is unclear)");

@@ -97,8 +97,8 @@ int camera_index(const HumanSequence& human, const std::string& value, const std
   const auto number = config::decimal_integer(value);
   if (number && *number >= 0 && *number < human.num_cameras()) return int(*number);
   if (number)
-    fail(where, ": camera ", *number, " does not exist for ", human.name(), " (", human.num_cameras(),
-         " cameras, indices 0 to ", human.num_cameras() - 1, ")");
+    fail(where, ": camera ", *number, " does not exist for ", human.name(), " (",
+         human.num_cameras(), " cameras, indices 0 to ", human.num_cameras() - 1, ")");
   std::string names;
   for (int c = 0; c < human.num_cameras() && c < 40; ++c)
     names += (c ? ", " : "") + human.camera_name(c);

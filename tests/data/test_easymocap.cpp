@@ -178,18 +178,15 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
        "'dist_05' is 1x3, expected 1x5 or 5x1 or 1x4 or 4x1"},
       {"intri.yml nested 100,000 deep",
        [](const fs::path& d) {
-         write_text(d / "intri.yml", read_text(d / "intri.yml") + "junk: " +
-                                         std::string(100000, '[') + std::string(100000, ']') +
-                                         "\n");
+         write_text(d / "intri.yml", read_text(d / "intri.yml") +
+                                         "junk: " + std::string(100000, '[') +
+                                         std::string(100000, ']') + "\n");
        },
        "intri.yml' nests 100000 levels deep, more than a calibration file may (64"},
-      {"extri.yml of 2 MiB",
-       [](const fs::path& d) { fs::resize_file(d / "extri.yml", 2 << 20); },
+      {"extri.yml of 2 MiB", [](const fs::path& d) { fs::resize_file(d / "extri.yml", 2 << 20); },
        "extri.yml' is 2097152 bytes, more than a calibration file may be (1048576)"},
       {"a camera only in extri.yml",
-       [](const fs::path& d) {
-         rewrite(d / "extri.yml", [](auto& n, auto&) { n.back() = "99"; });
-       },
+       [](const fs::path& d) { rewrite(d / "extri.yml", [](auto& n, auto&) { n.back() = "99"; }); },
        "list different cameras in 'names': '99' is only in '"},
       {"NaN in K",
        [](const fs::path& d) {
@@ -250,9 +247,8 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
   // As EasyMocap writes them too: four distortion coefficients (k3 = 0), cameras named by bare
   // numbers, extri.yml's cameras in another order.
   const fs::path variants = capture_copy("easymocap_variants");
-  rewrite(variants / "intri.yml", [](auto&, auto& e) {
-    entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone();
-  });
+  rewrite(variants / "intri.yml",
+          [](auto&, auto& e) { entry(e, "dist_05") = entry(e, "dist_05").colRange(0, 4).clone(); });
   rewrite(variants / "extri.yml", [](auto& n, auto&) { std::reverse(n.begin(), n.end()); });
   const auto read = EasyMocapSequence::open(variants, options());
   CHECK(torch::equal(read->camera(5).D.slice(0, 0, 4), clean->camera(5).D.slice(0, 0, 4)));
@@ -263,10 +259,9 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
   const fs::path numbered = capture_copy("easymocap_numbered");
   for (const char* file : {"intri.yml", "extri.yml"})
     write_text(numbered / file,
-               std::regex_replace(
-                   std::regex_replace(read_text(numbered / file),
-                                      std::regex("- \"0?([0-9]+)\""), "- $1"),
-                   std::regex("_0([0-9]):"), "_$1:"));
+               std::regex_replace(std::regex_replace(read_text(numbered / file),
+                                                     std::regex("- \"0?([0-9]+)\""), "- $1"),
+                                  std::regex("_0([0-9]):"), "_$1:"));
   for (const char* folder : {"images", "mask"})
     for (int c = 0; c < 10; ++c)
       fs::rename(numbered / folder / ("0" + std::to_string(c)),
