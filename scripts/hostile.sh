@@ -10,8 +10,9 @@
 # GROUP runs them all, one after another. Each group works in a folder of its own on copies of
 # the checkpoints it needs, so groups run side by side (CTest runs one test per group).
 # TH_HOSTILE_RUNS=DIR keeps those checkpoints in DIR, trained there once when missing (the group
-# name `prepare` only does that). Needs the built executables and Debian's python3 with numpy,
-# torch and opencv (the packages of scripts/install-deps.sh), which write the bad files.
+# name `prepare` trains them anew and runs no case). Needs the built executables and Debian's
+# python3 with numpy, torch and opencv (the packages of scripts/install-deps.sh), which write the
+# bad files.
 # Exit status 0 when every case behaves. TH_HOSTILE_TABLE=FILE also writes the table there.
 set -u
 repo=$(cd "$(dirname "$0")/.." && pwd)
@@ -43,6 +44,7 @@ runs=${TH_HOSTILE_RUNS:-$base/runs}
 mkdir -p "$runs"
 (
   flock 9
+  [[ " ${groups[*]} " == *" prepare "* ]] && rm -rf "$runs/run" "$runs/deep" "$runs/spc" "$runs/kmeans"
   train=("$apps/transhuman-train" --config tests/configs/tiny_train.yaml model.grouping.cache_dir="$runs/kmeans"
          train.val_views=0 data.root="$data" data.split_file="$data/split.yaml")
   [[ -f $runs/run/checkpoints/latest.pt ]] ||
