@@ -19,6 +19,12 @@ if (($# > 0)); then
 else
   mapfile -t files < <(git ls-files 'lib/*.cpp' 'lib/*.hpp' 'apps/*.cpp' 'tests/*.cpp' 'tests/*.hpp' 'bench/*.cpp' 'bench/*.hpp')
 fi
+# One clang-format process for all files (a process per file takes fifteen times as long); the
+# differences are shown file by file only for the files it names.
+if "$tool" --dry-run -Werror --style=file "${files[@]}" >/dev/null 2>&1; then
+  echo "check-format: ${#files[@]} files follow .clang-format"
+  exit 0
+fi
 diff_out=$(mktemp)
 trap 'rm -f "$diff_out"' EXIT
 bad=0
