@@ -153,17 +153,16 @@ Dataset::Dataset(const DataConfig& config, const std::string& setting, Mode mode
                : split + ": num_reference_views " + std::to_string(setting_.num_reference_views),
            ": ", range.name, " has only ", human->num_cameras(), " cameras");
     if (setting_.random_references && !config.reference_views.empty()) {
-      const std::string message =
-          "data.reference_views (--reference-views) fixes the reference "
-          "cameras, but " +
-          split + " draws " + std::to_string(setting_.num_reference_views) +
-          " at random per sample";
+      const std::string message = "data.reference_views (--reference-views) fixes the reference " +
+                                  std::string("cameras, but ") + split + " draws " +
+                                  std::to_string(setting_.num_reference_views) +
+                                  " at random per sample";
       // Training shares its config with evaluation, whose settings have fixed references.
       if (mode != Mode::Train) fail(message, ": use a setting with fixed references");
       warn_once(message + ": data.reference_views applies to evaluation only");
     }
     if (setting_.random_references) {
-      // drawn per sample (get)
+      // Drawn per sample (Dataset::load_item).
     } else if (!config.reference_views.empty()) {
       std::vector<CameraRef> values;
       for (const auto& v : config.reference_views) values.push_back({v, false});

@@ -78,12 +78,9 @@ int nesting_bound(const std::string& text) {
 
 cv::FileStorage open_storage(const fs::path& file) {
   refuse_special_file(file, "calibration");
-  std::error_code ec;
-  if (!fs::is_regular_file(file, ec)) {
-    if (ec && ec != std::errc::no_such_file_or_directory)
-      fail("cannot use '", file.string(), "': ", ec.message());
+  if (!exists_or_fail(file))
     fail("'", file.string(), "' is missing (EasyMocap's layout needs intri.yml and extri.yml)");
-  }
+  std::error_code ec;
   const uintmax_t bytes = fs::file_size(file, ec);
   if (!ec && bytes > kMaxCalibrationBytes)
     fail("'", file.string(), "' is ", bytes, " bytes, more than a calibration file may be (",
