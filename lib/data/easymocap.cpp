@@ -87,6 +87,8 @@ cv::FileStorage open_storage(const fs::path& file) {
          kMaxCalibrationBytes, ")");
   std::ifstream in(file, std::ios::binary);
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (text.find_first_not_of(" \t\r\n") == std::string::npos)
+    fail("'", file.string(), "' is empty (EasyMocap's calibration is OpenCV FileStorage YAML)");
   if (const int depth = nesting_bound(text); depth > kMaxCalibrationDepth)
     fail("'", file.string(), "' nests ", depth, " levels deep, more than a calibration file may (",
          kMaxCalibrationDepth, "; EasyMocap writes 2)");

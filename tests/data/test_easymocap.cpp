@@ -148,6 +148,8 @@ TEST_CASE("each malformed EasyMocap file is refused naming the file and key", "[
   const std::vector<Case> cases{
       {"intri.yml missing", [](const fs::path& d) { fs::remove(d / "intri.yml"); },
        "intri.yml' is missing"},
+      {"intri.yml empty", [](const fs::path& d) { write_text(d / "intri.yml", "\n"); },
+       "intri.yml' is empty"},
       {"intri.yml not YAML",
        [](const fs::path& d) { write_text(d / "intri.yml", "{{{ not: yaml"); },
        "cannot be read as OpenCV FileStorage YAML"},
