@@ -106,6 +106,20 @@ auto Communicator::guarded(const std::string& what, F&& f) -> decltype(f()) {
     throw;
   } catch (const std::exception& e) {
     failed_ = true;
+    // A rank that failed and said why (announce) is named with its own error.
+    for (int r = 0; r < world_size_; ++r) {
+      if (r == rank_) continue;
+      try {
+        if (!store_ || !store_->check({failure_key(r)})) continue;
+        const auto v = store_->get(failure_key(r));
+        fail("rank ", r, " of ", world_size_, " failed during ", what, ": ",
+             std::string(v.begin(), v.end()));
+      } catch (const Error&) {
+        throw;
+      } catch (const std::exception&) {
+        break;  // the store is gone too: say what is known
+      }
+    }
     fail("rank ", rank_, " of ", world_size_, ": ", what, " failed: ", message_of(e),
          " (another rank has probably died or hung; ranks wait train.dist_timeout_s = ", timeout_s_,
          " s for each other)");

@@ -5,6 +5,7 @@
 #include <numeric>
 
 #include "core/error.hpp"
+#include "dist/communicator.hpp"
 
 namespace th::dist {
 
@@ -26,6 +27,17 @@ std::vector<std::vector<int64_t>> balance(const std::vector<std::vector<int64_t>
   }
   for (auto& items : out) std::sort(items.begin(), items.end());
   return out;
+}
+
+void broadcast_items(Communicator& comm, std::vector<int64_t>& items, const std::string& what) {
+  Record list;
+  list.put(int64_t(items.size()));
+  for (const int64_t k : items) list.put(k);
+  std::string bytes = list.bytes();
+  comm.broadcast(bytes, what);
+  Record received(bytes);
+  items.assign(size_t(received.int64("item count")), 0);
+  for (auto& k : items) k = received.int64("item");
 }
 
 Record& Record::put(int64_t v) {

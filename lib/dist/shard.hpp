@@ -8,12 +8,18 @@
 
 namespace th::dist {
 
+class Communicator;
+
 // Items in groups that must stay on one rank (the views of one frame share its preparation),
 // each group with an estimated cost. Returns, for each of `ranks` ranks, the items it takes in
 // ascending order: whole groups, largest first to the least loaded rank (ties to the lower
 // rank), so every rank's estimated cost is within one group's of the others'. Deterministic.
 std::vector<std::vector<int64_t>> balance(const std::vector<std::vector<int64_t>>& groups,
                                           const std::vector<double>& cost, int ranks);
+
+// Rank 0's `items` on every rank (what is left to do after a resume, which rank 0 alone reads),
+// `what` naming them in an error.
+void broadcast_items(Communicator& comm, std::vector<int64_t>& items, const std::string& what);
 
 // A record of numbers and byte strings, written and read back in the same order.
 class Record {

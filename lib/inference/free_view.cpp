@@ -16,6 +16,7 @@
 #include "core/resources.hpp"
 #include "dist/communicator.hpp"
 #include "dist/shard.hpp"
+#include "inference/request.hpp"
 #include "io/files.hpp"
 #include "model/precision.hpp"
 #include "video/contact_sheet.hpp"
@@ -68,42 +69,6 @@ std::vector<int> parse_frame_range(const std::string& text) {
 
 namespace {
 
-// Keys of the config that do not change a frame's pixels: training only, where caches live,
-// what is checked rather than computed, and the loader's threads. Every other data.*, model.*
-// and render.* key is part of a request (a key added later counts until it is listed here).
-bool changes_pixels(const std::string& key) {
-  static const std::vector<std::string> kNot{"data.train_setting",
-                                             "data.test_setting",
-                                             "data.calibration_check",
-                                             "data.border_band",
-                                             "data.patch.",
-                                             "data.jitter.",
-                                             "data.workers",
-                                             "data.prefetch",
-                                             "model.encoder.pretrained",
-                                             "model.grouping.cache_dir",
-                                             "render.train_chunk_points",
-                                             "render.train_recompute"};
-  for (const auto& k : kNot)
-    if (key == k || (k.back() == '.' && key.rfind(k, 0) == 0)) return false;
-  return true;
-}
-
-// The config's paths, absolute and normal (the same files however they were named); an empty
-// path (the documented default) and "compute" stay as they are.
-std::map<std::string, std::string> config_paths(const Config& c) {
-  std::map<std::string, std::string> paths{
-      {"data.root", c.data.root},
-      {"data.split_file", c.data.split_file},
-      {"data.smpl_model", c.data.smpl_model},
-      {"data.visibility_root", c.data.visibility_root},
-      {"model.grouping.kmeans_file", c.model.grouping.kmeans_file}};
-  for (auto& [key, value] : paths)
-    if (!value.empty() && value != kKMeansCompute)
-      value = fs::absolute(value).lexically_normal().string();
-  return paths;
-}
-
 // What makes two runs' frames interchangeable; written to request.yaml. Beside the request
 // itself (person, frames, cameras, size, checkpoint), every setting that changes the pixels:
 // the precision the products resolve to on this device, the split setting (its reference views)
@@ -132,53 +97,10 @@ std::string describe(const Session& session, const VideoRequest& r, const std::s
     y << YAML::Key << "renderer" << YAML::Value << r.renderer_id;
     for (const auto& [key, value] : r.renderer_keys) y << YAML::Key << key << YAML::Value << value;
   }
-  y << YAML::Key << "settings" << YAML::Value << YAML::BeginMap;
-  y << YAML::Key << "precision" << YAML::Value
-    << model::resolve_products(c.precision, c.fp32_products, session.device()).describe();
-  y << YAML::Key << "eval.setting" << YAML::Value << c.eval.setting;
-  const YAML::Node tree = config::to_tree(c);
-  const auto paths = config_paths(c);
-  for (const char* section : {"data", "model", "render"})
-    for (const auto& [key, value] : config::leaves(tree[section], section)) {
-      if (!changes_pixels(key)) continue;
-      const auto path = paths.find(key);
-      y << YAML::Key << key << YAML::Value << (path != paths.end() ? path->second : value);
-    }
-  y << YAML::EndMap << YAML::EndMap;
+  y << YAML::Key << "settings" << YAML::Value;
+  emit_pixel_settings(y, c, session.device());
+  y << YAML::EndMap;
   return std::string(y.c_str()) + "\n";
-}
-
-// The keys whose values differ between the request that made a folder's frames (`before`, the
-// text of its request.yaml) and this one, as "key (frames: A, now: B)", at most four then a
-// count; empty when `before` cannot be read.
-std::string request_differences(const std::string& before, const std::string& now) {
-  std::map<std::string, std::string> old_keys, new_keys;
-  try {
-    old_keys = config::leaves(YAML::Load(before), "");
-    new_keys = config::leaves(YAML::Load(now), "");
-  } catch (const YAML::Exception&) {
-    return "";
-  }
-  std::vector<std::string> named;
-  auto name = [](const std::string& key) {
-    return key.rfind("settings.", 0) == 0 ? key.substr(9) : key;
-  };
-  for (const auto& [key, value] : new_keys) {
-    const auto it = old_keys.find(key);
-    if (it == old_keys.end())
-      named.push_back(name(key) + " (frames: not recorded, now: " + value + ")");
-    else if (it->second != value)
-      named.push_back(name(key) + " (frames: " + it->second + ", now: " + value + ")");
-  }
-  for (const auto& [key, value] : old_keys)
-    if (!new_keys.count(key)) named.push_back(name(key) + " (frames: " + value + ", now: not set)");
-  // Another renderer first: the bake keys that come and go with it say less.
-  std::stable_partition(named.begin(), named.end(),
-                        [](const std::string& n) { return n.rfind("renderer ", 0) == 0; });
-  std::string text;
-  for (size_t i = 0; i < named.size() && i < 4; ++i) text += (i ? ", " : "") + named[i];
-  if (named.size() > 4) text += " and " + std::to_string(named.size() - 4) + " more";
-  return text;
 }
 
 }  // namespace
@@ -303,7 +225,7 @@ VideoSummary render_video(const Session& session, const VideoRequest& request,
              "' holds frames/ without the request.yaml that says what made them; use "
              "another --out, or --force to render them again");
       if (!request.force) {
-        const std::string changed = request_differences(before, wanted);
+        const std::string changed = request_differences(before, wanted, "frames");
         fail("'", out_dir.string(), "' holds frames of another request",
              changed.empty() ? "" : ": " + changed, " (see ", request_file.string(),
              "); use another --out, or --force to render them again");
@@ -327,14 +249,7 @@ VideoSummary render_video(const Session& session, const VideoRequest& request,
   // Which frames are left is rank 0's to say; each rank then takes every ranks-th of them.
   std::vector<std::vector<int64_t>> assignment{todo};
   if (comm) {
-    dist::Record list;
-    list.put(int64_t(todo.size()));
-    for (const int64_t k : todo) list.put(k);
-    std::string bytes = list.bytes();
-    comm->broadcast(bytes, "the frames left to render");
-    dist::Record received(bytes);
-    todo.assign(size_t(received.int64("frame count")), 0);
-    for (auto& k : todo) k = received.int64("frame");
+    dist::broadcast_items(*comm, todo, "the frames left to render");
     std::vector<std::vector<int64_t>> single;
     for (const int64_t k : todo) single.push_back({k});
     assignment = dist::balance(single, std::vector<double>(single.size(), 1.0), comm->world_size());

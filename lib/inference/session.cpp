@@ -28,15 +28,31 @@ Session::Session(const Config& config, const torch::Device& device, const fs::pa
   model_->to(device);
   model_->eval();
   model_->set_products(model::select_products(config.precision, config.fp32_products, device));
+  identity_ = checkpoint_identity(checkpoint_);
 }
 
-std::string Session::checkpoint_id() const {
+Session::Session(const Config& config, const torch::Device& device, model::TransHuman model,
+                 std::shared_ptr<const data::Dataset> dataset, const torch::Tensor& canonical,
+                 std::string identity)
+    : config_(config),
+      device_(device),
+      checkpoint_(identity),  // what messages name
+      identity_(std::move(identity)),
+      dataset_(std::move(dataset)),
+      canonical_(canonical),
+      model_(std::move(model)) {
+  tokens_ = std::make_unique<pipeline::Tokens>(*model_, canonical_);
+}
+
+std::string checkpoint_identity(const fs::path& checkpoint) {
   std::error_code ec;
-  const auto bytes = fs::file_size(checkpoint_, ec);
-  const auto modified = fs::last_write_time(checkpoint_, ec).time_since_epoch().count();
-  return fs::absolute(checkpoint_).lexically_normal().string() + " (" + std::to_string(bytes) +
+  const auto bytes = fs::file_size(checkpoint, ec);
+  const auto modified = fs::last_write_time(checkpoint, ec).time_since_epoch().count();
+  return fs::absolute(checkpoint).lexically_normal().string() + " (" + std::to_string(bytes) +
          " bytes, modified " + std::to_string(modified) + ")";
 }
+
+std::string Session::checkpoint_id() const { return identity_; }
 
 int Session::find_human(const std::string& name) const {
   const auto& humans = dataset_->humans();
@@ -70,6 +86,18 @@ PreparedFrame Session::prepare(int human, int frame, int view) const {
   out.human = human;
   out.frame = frame;
   out.sample = dataset_->load_item({human, frame, view}, 0);
+  out.inputs =
+      pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
+  out.cache = pipeline::prepare_frame(*model_, out.inputs, config_.render);
+  return out;
+}
+
+PreparedFrame Session::prepare(data::Sample sample) const {
+  torch::NoGradGuard no_grad;
+  PreparedFrame out;
+  out.human = find_human(sample.human);
+  out.frame = sample.frame;
+  out.sample = std::move(sample);
   out.inputs =
       pipeline::frame_inputs(out.sample, canonical_, tokens_->labels(out.sample.body), device_);
   out.cache = pipeline::prepare_frame(*model_, out.inputs, config_.render);

@@ -34,6 +34,9 @@ struct PreparedFrame {
   model::FrameCache cache;
 };
 
+// A checkpoint file's identity: its absolute path, size and modification time.
+std::string checkpoint_identity(const std::filesystem::path& checkpoint);
+
 class Session {
  public:
   // Loads the body model, the setting config.eval.setting of config.data's split file (as
@@ -41,6 +44,13 @@ class Session {
   // reference's). Throws th::Error naming what is missing.
   Session(const Config& config, const torch::Device& device,
           const std::filesystem::path& checkpoint);
+  // A session over a network already in memory (evaluation's, or training's at a validation):
+  // `model` as it is (weights, device, mode and products untouched) with `dataset`'s setting and
+  // the body model's template `canonical`; `identity` stands for the checkpoint's identity
+  // (checkpoint_id).
+  Session(const Config& config, const torch::Device& device, model::TransHuman model,
+          std::shared_ptr<const data::Dataset> dataset, const torch::Tensor& canonical,
+          std::string identity);
 
   // Index of a person of the setting by folder name (empty: the setting's first). Throws
   // th::Error listing the setting's people.
@@ -56,6 +66,9 @@ class Session {
   // views; `view` is the camera whose intrinsics and image size the output camera takes (METHOD
   // 7: target view 3). Throws th::Error for an out-of-range index.
   PreparedFrame prepare(int human, int frame, int view) const;
+  // Prepares the frame of a sample already loaded from this session's dataset (its person,
+  // frame and reference views).
+  PreparedFrame prepare(data::Sample sample) const;
 
   // Dataset camera `view` of the prepared frame's person at the working resolution: K scaled
   // by data.ratio as the reader scales it, R, T (metres), float64.
@@ -109,7 +122,8 @@ class Session {
   DirectionalColors colors_along(const PreparedFrame& frame, const torch::Tensor& pts,
                                  const torch::Tensor& directions) const;
 
-  // The checkpoint's path, size and modification time: which weights made a set of frames.
+  // The checkpoint's path, size and modification time (checkpoint_identity), or the identity
+  // the session was made with: which weights made a set of frames.
   std::string checkpoint_id() const;
 
   const Config& config() const { return config_; }
@@ -120,6 +134,7 @@ class Session {
   Config config_;
   torch::Device device_;
   std::filesystem::path checkpoint_;
+  std::string identity_;  // checkpoint_id()
   std::shared_ptr<const data::Dataset> dataset_;
   torch::Tensor canonical_;
   mutable std::unique_ptr<pipeline::Tokens> tokens_;

@@ -135,16 +135,27 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rc,
   const auto result = frames
                           ? render(model, frames->prepare(model, inputs, rc), rays, rc, kInference)
                           : render_sample(model, rc, inputs, rays, kInference).result;
-  ViewResult r;
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ViewResult r = score_view(result.rgb, result.acc, sample, lpips, device);
+  r.seconds = seconds;
   r.stats = result.stats;
-  const auto rgb = result.rgb.to(torch::kCPU, torch::kFloat32);
+  return r;
+}
+
+ViewResult score_view(const torch::Tensor& ray_rgb, const torch::Tensor& ray_acc,
+                      const data::Sample& sample, metrics::LpipsImpl* lpips,
+                      const torch::Device& device) {
+  torch::NoGradGuard no_grad;
+  ViewResult r;
+  const auto rgb = ray_rgb.to(torch::kCPU, torch::kFloat32);
   require_finite_output(rgb, sample.human + " frame " + std::to_string(sample.frame) + " view " +
                                  std::to_string(sample.target_view));
-  r.acc_max = result.acc.numel() ? result.acc.max().item<double>() : 0.0;
-  r.rays = result.acc.numel();
-  r.opaque_1e3 = (1 - result.acc.to(torch::kDouble) < 1e-3).sum().item<int64_t>();
-  r.opaque_1e4 = (1 - result.acc.to(torch::kDouble) < 1e-4).sum().item<int64_t>();
+  const auto acc = ray_acc.to(torch::kCPU, torch::kDouble);
+  r.acc_max = acc.numel() ? acc.max().item<double>() : 0.0;
+  r.rays = acc.numel();
+  r.opaque_1e3 = (1 - acc < 1e-3).sum().item<int64_t>();
+  r.opaque_1e4 = (1 - acc < 1e-4).sum().item<int64_t>();
   r.psnr = metrics::psnr(rgb, sample.ray_rgb);  // unrendered valid rays are black (METHOD 6)
   const int64_t H = sample.target_image.size(0), W = sample.target_image.size(1);
   r.pred = scatter_image(rgb, sample.ray_pixel, H, W);

@@ -112,6 +112,12 @@ ViewResult evaluate_view(model::TransHumanImpl& model, const RenderConfig& rende
                          const data::Sample& sample, const model::FrameInputs& inputs,
                          metrics::LpipsImpl* lpips, const torch::Device& device,
                          FrameReuse* frames = nullptr);
+// The scores of a view from its colours and accumulated opacity at the sample's valid rays,
+// (R, 3) and (R) in the order of sample.ray_pixel, however they were rendered (exactly, or
+// through a bake): what evaluate_view scores. `seconds` and `stats` are left 0.
+ViewResult score_view(const torch::Tensor& ray_rgb, const torch::Tensor& ray_acc,
+                      const data::Sample& sample, metrics::LpipsImpl* lpips,
+                      const torch::Device& device);
 
 // Fails unless every value of the network's output `rgb` is finite, naming `what` (the
 // checkpoint and the view) and how many values are NaN or infinite: finite weights can still
