@@ -217,6 +217,8 @@ void claim_run_dir(const fs::path& dir, const YAML::Node& resolved, bool force, 
          ": choose another folder, --force to replace its contents",
          fs::exists(dir / "checkpoints") && own_outputs.empty()
              ? ", or --resume to continue the run"
+         : fs::exists(dir / "rows.jsonl") && own_outputs.empty()
+             ? ", or --resume to continue the evaluation"
              : "");
   }
   refuse_clearing_inputs(dir, inputs);

@@ -348,4 +348,38 @@ std::vector<std::pair<std::string, std::string>> BakedViews::request_keys() cons
           {"bake.brick", std::to_string(options_.brick)}};
 }
 
+std::string baked_label(double voxel) { return fmt::format("baked {:g} cm", voxel * 100); }
+
+SampleBakes::SampleBakes(const inference::Session& session, const BakeOptions& options)
+    : session_(session), options_(options) {
+  check_options(options);
+  march_.samples = session.config().render.samples;
+  march_.termination = session.config().render.termination_transmittance;
+}
+
+SampleBakes::View SampleBakes::render(const data::Sample& sample) {
+  View view;
+  if (!baked_ || baked_->human != sample.human || baked_->frame != sample.frame ||
+      baked_->reference_views != sample.reference_views) {
+    baked_.reset();  // the last frame's grid goes before the next is made
+    const auto t0 = Clock::now();
+    const auto prepared = session_.prepare(sample);
+    baked_ = bake_frame(session_, prepared, options_);
+    view.bake_seconds = since(t0);
+    ++bakes_;
+  }
+  const auto t0 = Clock::now();
+  const auto image =
+      render_baked(*baked_, sample.K.to(torch::kFloat64), sample.R.to(torch::kFloat64),
+                   sample.T.to(torch::kFloat64).reshape({3, 1}), int(sample.target_image.size(1)),
+                   int(sample.target_image.size(0)), march_);
+  const auto pixel = sample.ray_pixel.to(torch::kCPU);
+  view.ray_rgb = image.rgb.reshape({-1, 3}).index_select(0, pixel);
+  view.ray_acc = image.acc.reshape({-1}).index_select(0, pixel);
+  view.march_seconds = since(t0);
+  view.stats = image.stats;
+  ++views_;
+  return view;
+}
+
 }  // namespace th::bake

@@ -14,6 +14,7 @@
 
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -100,6 +101,38 @@ class BakedViews {
   bool from_file_ = false;  // baked_ came from use()
   BakedFrame baked_;
   BakeReport report_;
+};
+
+// What a score made through bakes says of its renderer: "baked 2 cm" (the voxel in centimetres).
+std::string baked_label(double voxel);
+
+// Dataset views of loaded samples (evaluation, validation while training) rendered from bakes
+// of their frames: one bake per (person, frame, reference views), made when a sample of another
+// frame comes and dropped then, so one bake is held at a time (a setting's views come frame by
+// frame). The views are marched with the session's render.samples and
+// render.termination_transmittance, at the sample's own camera and size.
+class SampleBakes {
+ public:
+  SampleBakes(const inference::Session& session, const BakeOptions& options);
+
+  struct View {
+    torch::Tensor ray_rgb, ray_acc;  // (R, 3), (R) at the sample's valid rays (sample.ray_pixel)
+    double bake_seconds = 0;         // the frame's bake, when made for this view; else 0
+    double march_seconds = 0;
+    MarchStats stats;
+  };
+  View render(const data::Sample& sample);
+
+  int64_t bakes() const { return bakes_; }  // frames baked so far
+  int64_t views() const { return views_; }
+  const BakeOptions& options() const { return options_; }
+
+ private:
+  const inference::Session& session_;
+  BakeOptions options_;
+  MarchOptions march_;
+  std::optional<BakedFrame> baked_;
+  int64_t bakes_ = 0, views_ = 0;
 };
 
 }  // namespace th::bake

@@ -27,6 +27,7 @@ enum class Coordinate { relative, absolute, none };
 enum class Representation { transhuman, spc_trilinear };
 enum class Recompute { automatic, always, never };
 enum class MismatchPolicy { error, warn };
+enum class ViewRenderer { exact, baked };
 
 #define TH_CHOICE_NAMES(E, ...)                             \
   inline const config::ChoiceNames<E>& choice_names(E) {    \
@@ -61,6 +62,7 @@ TH_CHOICE_NAMES(Representation, {"transhuman", Representation::transhuman},
 TH_CHOICE_NAMES(MismatchPolicy, {"error", MismatchPolicy::error}, {"warn", MismatchPolicy::warn})
 TH_CHOICE_NAMES(Recompute, {"auto", Recompute::automatic}, {"always", Recompute::always},
                 {"never", Recompute::never})
+TH_CHOICE_NAMES(ViewRenderer, {"exact", ViewRenderer::exact}, {"baked", ViewRenderer::baked})
 #undef TH_CHOICE_NAMES
 
 // ---- the sections: each field's type and default; its key, accepted values and description
@@ -191,6 +193,7 @@ struct TrainConfig {
   int save_every_epochs = 10;
   int val_every_epochs = 10;
   int val_views = 2;
+  ViewRenderer val_renderer = ViewRenderer::exact;
   int log_every_steps = 10;
   double max_minutes = 0;
   std::string dist_backend = "auto";
@@ -206,6 +209,8 @@ struct EvalConfig {
   bool save_images = true;
   bool reuse_frames = true;
   MismatchPolicy model_mismatch = MismatchPolicy::error;
+  ViewRenderer renderer = ViewRenderer::exact;
+  double bake_voxel = 0.02;
 };
 
 struct Config {
@@ -392,6 +397,9 @@ void visit_fields(V& v, TrainConfig& c) {
   v("val_every_epochs", c.val_every_epochs, config::at_least(0),
     "validation interval; 0: only after the last epoch");
   v("val_views", c.val_views, config::in(0, 1024), "views rendered per validation");
+  v.choice("val_renderer", c.val_renderer,
+           "validation views: exact (the network per sample) or baked (each frame baked at "
+           "eval.bake_voxel, its views marched through the grid; METHOD 7.1)");
   v("log_every_steps", c.log_every_steps, config::at_least(1), "metrics line interval");
   v("max_minutes", c.max_minutes, config::at_least(0),
     "stop with a checkpoint after this wall time; 0: no limit");
@@ -418,6 +426,11 @@ void visit_fields(V& v, EvalConfig& c) {
   v.choice("model_mismatch", c.model_mismatch,
            "a checkpoint trained with other model.* values: error names the keys and stops, "
            "warn names them and goes on");
+  v.choice("renderer", c.renderer,
+           "exact (the network per sample: the paper's protocol) or baked (each frame baked once, "
+           "its views marched through the grid: an approximate score; METHOD 7.1)");
+  v("bake_voxel", c.bake_voxel, config::in(0.001, 0.2),
+    "the baked renderer's lattice spacing, metres (eval.renderer and train.val_renderer baked)");
 }
 template <class V>
 void visit_fields(V& v, Config& c) {

@@ -2,19 +2,25 @@
 
 #include <spdlog/spdlog.h>
 #include <torch/torch.h>
+#include <yaml-cpp/yaml.h>
 
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
+#include <tuple>
 
+#include "bake/bake.hpp"
 #include "body/smpl.hpp"
 #include "core/error.hpp"
 #include "core/progress.hpp"
 #include "data/dataset.hpp"
 #include "dist/communicator.hpp"
 #include "dist/shard.hpp"
+#include "inference/request.hpp"
+#include "inference/session.hpp"
 #include "io/files.hpp"
 #include "metrics/lpips.hpp"
 #include "pipeline/checkpoint.hpp"
@@ -47,14 +53,17 @@ std::string csv_field(const std::string& text) {
 // Each file is written whole or not at all (a full disk names the file that failed).
 void write_outputs(const EvalSummary& s, const fs::path& dir) {
   std::ostringstream csv;
-  csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points\n";
+  csv << "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points,"
+         "renderer\n";
   for (const auto& r : s.per_image)
     csv << csv_field(r.human) << ',' << r.frame << ',' << r.view << ',' << fmt(r.psnr, 6) << ','
         << fmt(r.ssim, 6) << ',' << fmt(r.lpips, 6) << ',' << fmt(r.seconds, 3) << ',' << r.points
-        << ',' << r.culled_points << ',' << r.evaluated_points << '\n';
+        << ',' << r.culled_points << ',' << r.evaluated_points << ',' << csv_field(r.renderer)
+        << '\n';
   io::write_file_atomic(dir / "per_image.csv", csv.str());
   pipeline::JsonLine j;
   j.add("setting", s.setting)
+      .add("renderer", s.renderer)
       .add("images", s.images)
       .add("psnr", s.psnr)
       .add("ssim", s.ssim)
@@ -63,6 +72,7 @@ void write_outputs(const EvalSummary& s, const fs::path& dir) {
       .add("seconds_per_image", s.seconds_per_image)
       .add("opaque_rays_1e-3", s.opaque_1e3)
       .add("opaque_rays_1e-4", s.opaque_1e4);
+  if (s.bakes) j.add("frames_baked", s.bakes);
   io::write_file_atomic(dir / "summary.json", j.str() + "\n");
   io::write_file_atomic(dir / "results.md", markdown_table({s}));
 }
@@ -76,11 +86,12 @@ std::string panel_file_name(const std::string& human, int frame, int view) {
 }
 
 std::string markdown_table(const std::vector<EvalSummary>& summaries) {
-  std::string out = "| setting | images | PSNR | SSIM | LPIPS |\n|---|---|---|---|---|\n";
+  std::string out =
+      "| setting | renderer | images | PSNR | SSIM | LPIPS |\n|---|---|---|---|---|---|\n";
   for (const auto& s : summaries)
-    out += "| " + s.setting + " | " + std::to_string(s.images) + " | " + fmt(s.psnr, 2) + " | " +
-           fmt(s.ssim, 3) + " | " + (s.lpips_available ? fmt(s.lpips, 3) : "n/a (no weights)") +
-           " |\n";
+    out += "| " + s.setting + " | " + s.renderer + " | " + std::to_string(s.images) + " | " +
+           fmt(s.psnr, 2) + " | " + fmt(s.ssim, 3) + " | " +
+           (s.lpips_available ? fmt(s.lpips, 3) : "n/a (no weights)") + " |\n";
   return out;
 }
 
@@ -103,9 +114,133 @@ std::vector<std::vector<int64_t>> shard_views(const std::vector<std::pair<int, i
   return dist::balance(groups, cost, ranks);
 }
 
+namespace {
+
+// What makes two evaluations' rows interchangeable (request.yaml): the checkpoint, the setting,
+// the renderer (with its voxel) and every setting that changes a pixel.
+std::string describe(const Config& config, const torch::Device& device,
+                     const std::string& checkpoint_id, const std::string& renderer) {
+  YAML::Emitter y;
+  y << YAML::BeginMap << YAML::Key << "checkpoint" << YAML::Value << checkpoint_id;
+  y << YAML::Key << "setting" << YAML::Value << config.eval.setting;
+  y << YAML::Key << "renderer" << YAML::Value << renderer;
+  if (config.eval.renderer == ViewRenderer::baked)
+    y << YAML::Key << "bake.voxel" << YAML::Value << fmt(config.eval.bake_voxel, 4);
+  y << YAML::Key << "settings" << YAML::Value;
+  inference::emit_pixel_settings(y, config, device);
+  y << YAML::EndMap;
+  return std::string(y.c_str()) + "\n";
+}
+
+// A scored view as a line of rows.jsonl, and back.
+std::string row_line(int64_t item, const ImageScore& r) {
+  return pipeline::JsonLine()
+             .add("item", item)
+             .add("human", r.human)
+             .add("frame", r.frame)
+             .add("view", r.view)
+             .add("renderer", r.renderer)
+             .add("psnr", r.psnr)
+             .add("ssim", r.ssim)
+             .add("lpips", r.lpips)
+             .add("seconds", r.seconds)
+             .add("points", r.points)
+             .add("culled_points", r.culled_points)
+             .add("evaluated_points", r.evaluated_points)
+             .add("rays", r.rays)
+             .add("opaque_1e3", r.opaque_1e3)
+             .add("opaque_1e4", r.opaque_1e4)
+             .str() +
+         "\n";
+}
+
+// The rows of an earlier run's rows.jsonl that belong to the views now evaluated (`items`: the
+// dataset's (person name, frame, view) of each view index). A line cut short by a stop is
+// dropped with a warning (its view is evaluated again); any other line that does not read, or
+// names a view the setting does not have at that index, is an error naming the file and line.
+// Returns the lines kept (every row read, a line cut short left out), for the file to be
+// written again before rows are appended to it.
+std::string read_rows(const fs::path& file,
+                      const std::vector<std::tuple<std::string, int, int>>& items,
+                      const std::string& renderer, std::vector<std::optional<ImageScore>>& rows) {
+  const std::string text = io::read_file(file);
+  std::stringstream in(text);
+  std::string line;
+  int number = 0;
+  int64_t beyond = 0;
+  std::string kept;
+  while (std::getline(in, line)) {
+    ++number;
+    if (line.empty()) continue;
+    const std::string where = "'" + file.string() + "' line " + std::to_string(number);
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(line);
+    } catch (const nlohmann::json::exception&) {
+      if (in.peek() == EOF && text.back() != '\n') {
+        spdlog::warn(
+            "eval: {} was cut short (the run stopped while writing it): its view is "
+            "evaluated again",
+            where);
+        continue;
+      }
+      fail(where,
+           " is not a JSON object: remove the folder's rows.jsonl to evaluate every view "
+           "again, or --force");
+    }
+    ImageScore r;
+    int64_t item = -1;
+    try {
+      item = j.at("item").get<int64_t>();
+      r.human = j.at("human").get<std::string>();
+      r.frame = j.at("frame").get<int>();
+      r.view = j.at("view").get<int>();
+      r.renderer = j.at("renderer").get<std::string>();
+      auto number_or_nan = [&](const char* key) {
+        const auto& v = j.at(key);
+        return v.is_null() ? NAN : v.get<double>();
+      };
+      r.psnr = number_or_nan("psnr");
+      r.ssim = number_or_nan("ssim");
+      r.lpips = number_or_nan("lpips");
+      r.seconds = number_or_nan("seconds");
+      r.points = j.at("points").get<int64_t>();
+      r.culled_points = j.at("culled_points").get<int64_t>();
+      r.evaluated_points = j.at("evaluated_points").get<int64_t>();
+      r.rays = j.at("rays").get<int64_t>();
+      r.opaque_1e3 = j.at("opaque_1e3").get<int64_t>();
+      r.opaque_1e4 = j.at("opaque_1e4").get<int64_t>();
+    } catch (const nlohmann::json::exception& e) {
+      fail(where, " is not a row of scores (", e.what(), ")");
+    }
+    if (r.renderer != renderer)
+      fail(where, " was rendered by '", r.renderer, "', not '", renderer, "'");
+    if (item < 0) fail(where, ": item ", item, " is negative");
+    kept += line + "\n";
+    if (item >= int64_t(items.size())) {
+      ++beyond;  // a larger eval.limit before
+      continue;
+    }
+    const auto& [human, frame, view] = items[size_t(item)];
+    if (r.human != human || r.frame != frame || r.view != view)
+      fail(where, " scores ", r.human, " frame ", r.frame, " view ", r.view, " as view ", item,
+           ", where the setting now has ", human, " frame ", frame, " view ", view,
+           ": evaluate in another folder, or --force");
+    rows[size_t(item)] = std::move(r);
+  }
+  if (beyond)
+    spdlog::info("eval: {} rows of {} lie beyond eval.limit and are left out of this summary",
+                 beyond, file.string());
+  return kept;
+}
+
+}  // namespace
+
 EvalSummary evaluate(const Config& config, const torch::Device& device, const fs::path& checkpoint,
-                     const fs::path& out_dir, dist::Communicator* comm) {
+                     const fs::path& out_dir, dist::Communicator* comm, bool resume) {
   const std::string setting = config.eval.setting;
+  const bool baked = config.eval.renderer == ViewRenderer::baked;
+  const std::string renderer = baked ? bake::baked_label(config.eval.bake_voxel) : "exact";
   const auto smpl = data::load_body_model(config.data);
   auto dataset =
       std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
@@ -118,22 +253,82 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   auto lpips = metrics::try_load_lpips(config.eval.lpips_weights, device, "the LPIPS metric");
   const torch::Tensor canonical = smpl->v_template;   // float64: token positions [parity]
   pipeline::Tokens tokens(*model, smpl->v_template);  // the checkpoint's token groups
+  const std::string checkpoint_id = inference::checkpoint_identity(checkpoint);
+  // The baked renderer: the same network, its frames baked through a session over it.
+  std::unique_ptr<inference::Session> session;
+  std::unique_ptr<bake::SampleBakes> bakes;
+  if (baked) {
+    session = std::make_unique<inference::Session>(config, device, model, dataset, canonical,
+                                                   checkpoint_id);
+    bake::BakeOptions options;
+    options.voxel = config.eval.bake_voxel;
+    bakes = std::make_unique<bake::SampleBakes>(*session, options);
+  }
 
   size_t n = dataset->size();
   if (config.eval.limit > 0) n = std::min(n, size_t(config.eval.limit));
   const int ranks = comm ? comm->world_size() : 1, rank = comm ? comm->rank() : 0;
-  std::vector<std::pair<int, int>> item_frames;
+  const fs::path image_dir = out_dir / "images";
+  const bool writes = !out_dir.empty();
+  if (config.eval.save_images && writes) fs::create_directories(image_dir);
+
+  // The rows an earlier run of the same request scored (rank 0 reads them), and the views left.
+  std::vector<std::optional<ImageScore>> rows(n);
+  std::ofstream journal;
+  const fs::path journal_file = out_dir / "rows.jsonl";
+  if (writes) {
+    const fs::path request_file = out_dir / "request.yaml";
+    const std::string wanted = describe(config, device, checkpoint_id, renderer);
+    if (resume) {
+      if (!fs::exists(request_file))
+        fail("cannot resume the evaluation in '", out_dir.string(),
+             "': it holds no request.yaml (it is not an evaluation's folder, or one that never "
+             "started); use another --out, or --force to evaluate anew");
+      const std::string before = io::read_file(request_file);
+      if (before != wanted) {
+        const std::string changed = inference::request_differences(before, wanted, "rows");
+        fail("cannot resume the evaluation in '", out_dir.string(),
+             "': its rows were made by another request", changed.empty() ? "" : ": " + changed,
+             " (see ", request_file.string(), "); use another --out, or --force to evaluate anew");
+      }
+      std::vector<std::tuple<std::string, int, int>> items;
+      for (size_t i = 0; i < n; ++i) {
+        const auto& it = dataset->item(i);
+        items.emplace_back(dataset->humans()[size_t(it.human)]->name(), it.frame, it.target_view);
+      }
+      io::write_file_atomic(journal_file, fs::exists(journal_file)
+                                              ? read_rows(journal_file, items, renderer, rows)
+                                              : std::string());
+    } else {
+      io::write_file_atomic(request_file, wanted);
+      io::write_file_atomic(journal_file, "");
+    }
+    journal.open(journal_file, std::ios::app);
+    if (!journal) fail("cannot append to '", journal_file.string(), "'");
+  }
+  std::vector<int64_t> todo;
   for (size_t i = 0; i < n; ++i)
-    item_frames.emplace_back(dataset->item(i).human, dataset->item(i).frame);
-  const auto assignment = shard_views(item_frames, config.eval.reuse_frames, ranks);
+    if (!rows[i]) todo.push_back(int64_t(i));
+  if (comm && resume)  // rank 0 read the rows: which views are left is its to say
+    dist::broadcast_items(*comm, todo, "the views left to evaluate");
+  if (resume && rank == 0)
+    spdlog::info("eval: resumed: {} of {} views already scored, {} left", n - todo.size(), n,
+                 todo.size());
+  std::vector<std::pair<int, int>> item_frames;
+  for (const int64_t i : todo)
+    item_frames.emplace_back(dataset->item(size_t(i)).human, dataset->item(size_t(i)).frame);
+  // A bake serves every view of its frame: the baked renderer keeps a frame's views together.
+  auto assignment = shard_views(item_frames, config.eval.reuse_frames || baked, ranks);
+  for (auto& list : assignment)
+    for (auto& index : list) index = todo[size_t(index)];
   const auto& mine = assignment[size_t(rank)];
   std::vector<size_t> order(mine.begin(), mine.end());
   data::Prefetcher loader(dataset, order, std::vector<uint64_t>(order.size(), 0),
                           config.data.workers, config.data.prefetch);
-  const fs::path image_dir = out_dir / "images";
-  const bool writes = !out_dir.empty();
-  if (config.eval.save_images && writes) fs::create_directories(image_dir);
   if (ranks > 1) spdlog::info("eval: {} views over {} ranks ({} here)", n, ranks, mine.size());
+  if (baked)
+    spdlog::info("eval: views {} (eval.renderer baked, eval.bake_voxel {} m): one bake per frame",
+                 renderer, config.eval.bake_voxel);
 
   // One view: its scores and counts, and its panel's PNG bytes, as a record (sent to rank 0 by
   // the others).
@@ -143,18 +338,26 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     TORCH_CHECK(s.human == dataset->humans()[size_t(dataset->item(size_t(item)).human)]->name() &&
                     s.frame == dataset->item(size_t(item)).frame,
                 "eval: the loader is out of step with the assignment at item ", item);
-    const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
     pipeline::ViewResult r;
     try {
-      r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
-                                  config.eval.reuse_frames ? &frames : nullptr);
+      if (bakes) {
+        const auto view = bakes->render(s);
+        r = pipeline::score_view(view.ray_rgb, view.ray_acc, s, lpips.get(), device);
+        r.seconds = view.bake_seconds + view.march_seconds;
+        r.stats.points = view.stats.samples;
+      } else {
+        const auto inputs = pipeline::frame_inputs(s, canonical, tokens.labels(s.body), device);
+        r = pipeline::evaluate_view(*model, config.render, s, inputs, lpips.get(), device,
+                                    config.eval.reuse_frames ? &frames : nullptr);
+      }
     } catch (const Error& e) {
       fail("checkpoint '", checkpoint.string(), "', ", e.what());
     }
     std::string panel;
     if (config.eval.save_images) {
       std::vector<cv::Mat> imgs{video::to_bgr8(r.pred), video::to_bgr8(r.gt)};
-      std::vector<std::string> captions{"prediction " + fmt(r.psnr, 2) + " dB", "ground truth"};
+      std::vector<std::string> captions{
+          (baked ? renderer + " " : "prediction ") + fmt(r.psnr, 2) + " dB", "ground truth"};
       for (int64_t v = 0; v < s.ref_images.size(0); ++v) {
         imgs.push_back(video::to_bgr8(s.ref_images[v].permute({1, 2, 0})));
         captions.push_back("input view " + std::to_string(s.reference_views[size_t(v)]));
@@ -174,14 +377,14 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
 
   EvalSummary summary;
   summary.setting = setting;
+  summary.renderer = renderer;
   summary.lpips_available = lpips != nullptr;
-  std::vector<std::optional<ImageScore>> rows(n);
-  int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;
-  Progress progress("eval " + setting, int64_t(rank == 0 ? n : mine.size()), "img");
+  Progress progress("eval " + setting, int64_t(rank == 0 ? todo.size() : mine.size()), "img");
   auto collect = [&](int64_t item, const std::string& bytes) {
     dist::Record rec(bytes);
     ImageScore score;
     score.human = rec.text("person");
+    score.renderer = renderer;
     score.frame = int(rec.int64("frame"));
     score.view = int(rec.int64("view"));
     score.psnr = rec.number("PSNR");
@@ -191,13 +394,17 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     score.points = rec.int64("points");
     score.culled_points = rec.int64("culled points");
     score.evaluated_points = rec.int64("evaluated points");
-    rays += rec.int64("rays");
-    opaque_1e3 += rec.int64("rays opaque to 1e-3");
-    opaque_1e4 += rec.int64("rays opaque to 1e-4");
+    score.rays = rec.int64("rays");
+    score.opaque_1e3 = rec.int64("rays opaque to 1e-3");
+    score.opaque_1e4 = rec.int64("rays opaque to 1e-4");
     const std::string panel = rec.text("panel");
     if (!panel.empty() && writes)
       io::write_file_atomic(image_dir / panel_file_name(score.human, score.frame, score.view),
                             panel);
+    if (journal.is_open()) {
+      journal << row_line(item, score) << std::flush;
+      if (!journal) fail("cannot append to '", journal_file.string(), "' (disk full?)");
+    }
     char note[64];
     std::snprintf(note, sizeof note, "PSNR %.2f SSIM %.3f", score.psnr, score.ssim);
     rows.at(size_t(item)) = std::move(score);
@@ -207,11 +414,19 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   // Rank 0 (or the only process), once every row is in: the summary and the three files.
   auto finish = [&] {
     progress.finish();
-    if (config.eval.reuse_frames)
+    if (bakes)
+      spdlog::info("eval: {} frames baked for {} views ({})", bakes->bakes(), bakes->views(),
+                   renderer);
+    else if (config.eval.reuse_frames)
       spdlog::info("eval: {} frames prepared for {} views (eval.reuse_frames{})", frames.prepared(),
                    frames.prepared() + frames.reused(), ranks > 1 ? ", on this rank" : "");
+    summary.bakes = bakes ? bakes->bakes() : 0;
+    int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;
     for (auto& row : rows) {
       TORCH_CHECK(row.has_value(), "eval: a view's result is missing after every rank finished");
+      rays += row->rays;
+      opaque_1e3 += row->opaque_1e3;
+      opaque_1e4 += row->opaque_1e4;
       summary.per_image.push_back(std::move(*row));
     }
     summary.images = int(summary.per_image.size());
@@ -230,8 +445,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     summary.lpips = lpips ? mean([](const ImageScore& r) { return r.lpips; }) : NAN;
     summary.seconds_per_image = mean([](const ImageScore& r) { return r.seconds; });
     if (writes) write_outputs(summary, out_dir);
-    spdlog::info("{}: {} images | PSNR {:.2f} | SSIM {:.4f} | LPIPS {} | {:.1f} s/image", setting,
-                 summary.images, summary.psnr, summary.ssim,
+    spdlog::info("{} ({}): {} images | PSNR {:.2f} | SSIM {:.4f} | LPIPS {} | {:.2f} s/image",
+                 setting, renderer, summary.images, summary.psnr, summary.ssim,
                  lpips ? fmt(summary.lpips, 4) : "n/a (no weights)", summary.seconds_per_image);
   };
 

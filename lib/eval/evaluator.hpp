@@ -19,16 +19,22 @@ namespace th::eval {
 
 struct ImageScore {
   std::string human;
+  std::string renderer;  // "exact", or "baked 2 cm"
   int frame = 0, view = 0;
   double psnr = 0, ssim = 0, lpips = 0;  // lpips NaN when unavailable
   double seconds = 0;
-  int64_t points = 0;            // rays x samples
-  int64_t culled_points = 0;     // of those, farther than render.cull_distance from the body
-  int64_t evaluated_points = 0;  // points whose density the network computed
+  // Exact: rays x samples; of those, farther than render.cull_distance from the body; points
+  // whose density the network computed. Baked: the samples looked up in the grid, 0, 0.
+  int64_t points = 0, culled_points = 0, evaluated_points = 0;
+  int64_t rays = 0, opaque_1e3 = 0, opaque_1e4 = 0;  // rays, and those opaque to 1e-3, 1e-4
 };
 
 struct EvalSummary {
   std::string setting;
+  // What rendered the views: "exact" (the network at every sample: the paper's protocol) or
+  // "baked <voxel> cm" (each frame baked once, its views marched through the grid; METHOD 7.1).
+  std::string renderer = "exact";
+  int64_t bakes = 0;  // frames baked (baked renderer)
   int images = 0;
   double psnr = 0, ssim = 0, lpips = 0;  // means; lpips NaN when unavailable
   bool lpips_available = false;
@@ -39,7 +45,16 @@ struct EvalSummary {
 };
 
 // Evaluates `checkpoint` (ours or a reference .pth) on config.eval.setting, writing results to
-// `out_dir`. config.eval.limit > 0 evaluates only the first images.
+// `out_dir`. config.eval.limit > 0 evaluates only the first images. config.eval.renderer says
+// how views are rendered: exact, or baked (eval.bake_voxel; one bake per frame, held while its
+// views are scored). Every row says its renderer.
+//
+// `out_dir` gets request.yaml (the checkpoint, the renderer and every setting that changes a
+// pixel) and rows.jsonl (each scored view as it comes). With `resume`, the views rows.jsonl
+// holds are kept and only the others are evaluated, under the same request only: another one
+// (another renderer, voxel, checkpoint or setting) is refused naming the keys that differ.
+// Over several ranks every rank is given the same `resume`; rank 0 reads the rows and tells the
+// others which views are left.
 //
 // With `comm` (several ranks), the views are split over the ranks by frame (the views of a
 // frame share its preparation), balanced by estimated cost (shard_views); rank 0 receives every
@@ -49,7 +64,7 @@ struct EvalSummary {
 // is written.
 EvalSummary evaluate(const Config& config, const torch::Device& device,
                      const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir,
-                     dist::Communicator* comm = nullptr);
+                     dist::Communicator* comm = nullptr, bool resume = false);
 
 // Which of a setting's first `n` items each of `ranks` ranks evaluates: the items of one
 // (person, frame) stay together when `reuse_frames` (their preparation is shared), each frame
@@ -61,7 +76,7 @@ std::vector<std::vector<int64_t>> shard_views(const std::vector<std::pair<int, i
 // The file name of an image's panel in <out_dir>/images: "<human>_f<frame:04>_v<view:02>.png".
 std::string panel_file_name(const std::string& human, int frame, int view);
 
-// "| setting | images | PSNR | SSIM | LPIPS |" rows for a set of summaries.
+// "| setting | renderer | images | PSNR | SSIM | LPIPS |" rows for a set of summaries.
 std::string markdown_table(const std::vector<EvalSummary>& summaries);
 
 }  // namespace th::eval

@@ -6,6 +6,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -75,6 +76,7 @@ bool plot_training_curve(const std::filesystem::path& metrics_jsonl,
                          const std::filesystem::path& png) {
   std::ifstream in(metrics_jsonl);
   Series loss, psnr, val;
+  std::set<std::string> renderers;  // of the validation points
   for (std::string line; std::getline(in, line);) {
     const auto n = numbers(line);
     if (!n.count("step")) continue;
@@ -82,8 +84,19 @@ bool plot_training_curve(const std::filesystem::path& metrics_jsonl,
     if (n.count("loss"))
       loss.x.push_back(step), loss.y.push_back(std::log10(std::max(n.at("loss"), 1e-8)));
     if (n.count("psnr")) psnr.x.push_back(step), psnr.y.push_back(n.at("psnr"));
-    if (n.count("val_psnr")) val.x.push_back(step), val.y.push_back(n.at("val_psnr"));
+    if (n.count("val_psnr")) {
+      val.x.push_back(step), val.y.push_back(n.at("val_psnr"));
+      // "val_renderer": "baked 2 cm" (lines written before it was recorded: exact)
+      const std::string key = "\"val_renderer\": \"";
+      const size_t at = line.find(key);
+      const size_t end = at == std::string::npos ? at : line.find('"', at + key.size());
+      renderers.insert(end == std::string::npos
+                           ? std::string("exact")
+                           : line.substr(at + key.size(), end - at - key.size()));
+    }
   }
+  std::string renderer;
+  for (const auto& r : renderers) renderer += (renderer.empty() ? "" : " + ") + r;
   if (loss.x.size() < 2) return false;
   cv::Mat img(360, 960, CV_8UC3, cv::Scalar(255, 255, 255));
   draw_panel(img, cv::Rect(70, 30, 380, 290), {{loss, cv::Scalar(180, 80, 30)}},
@@ -92,7 +105,7 @@ bool plot_training_curve(const std::filesystem::path& metrics_jsonl,
   if (!val.x.empty()) right.push_back({val, cv::Scalar(30, 30, 200)});
   draw_panel(img, cv::Rect(560, 30, 380, 290), right,
              val.x.empty() ? "PSNR of training batches (dB)"
-                           : "PSNR: training batches (green), validation (red)");
+                           : "PSNR: training batches (green), validation " + renderer + " (red)");
   video::write_png(png, img);
   return true;
 }

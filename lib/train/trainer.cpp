@@ -346,7 +346,7 @@ void Run::end_of_epoch(int epoch) {
       [&] {
         if (due(tc_.save_every_epochs)) checkpoint(true);
         if (val_set_ && due(tc_.val_every_epochs)) {
-          summary_.last_val_psnr = validate(*model_, config_, *val_set_, *tokens_, canonical_,
+          summary_.last_val_psnr = validate(model_, config_, val_set_, *tokens_, canonical_,
                                             device_, val_dir_, st_.epoch, *metrics_log_, st_.step);
           plot_training_curve(run_ / "metrics.jsonl", run_ / "training_curve.png");
         }

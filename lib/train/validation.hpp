@@ -1,6 +1,8 @@
 #pragma once
 // Periodic validation during training: render a few test views, log their PSNR, keep the
-// images, and warn when the model has collapsed (renders all black).
+// images, and warn when the model has collapsed (renders all black). train.val_renderer says
+// how the views are rendered: exact, or from bakes of their frames (eval.bake_voxel); the
+// metrics line names it (val_renderer), and the training curve with it.
 
 #include <filesystem>
 
@@ -13,9 +15,10 @@
 namespace th::train {
 
 // Returns the mean PSNR of the rendered views; writes <dir>/epoch_<e>_<k>.png panels.
-double validate(model::TransHumanImpl& model, const Config& config, const data::Dataset& val_set,
-                pipeline::Tokens& tokens, const torch::Tensor& canonical,
-                const torch::Device& device, const std::filesystem::path& dir, int epoch,
-                pipeline::JsonlWriter& log, int64_t step);
+double validate(model::TransHuman model, const Config& config,
+                const std::shared_ptr<const data::Dataset>& val_set, pipeline::Tokens& tokens,
+                const torch::Tensor& canonical, const torch::Device& device,
+                const std::filesystem::path& dir, int epoch, pipeline::JsonlWriter& log,
+                int64_t step);
 
 }  // namespace th::train

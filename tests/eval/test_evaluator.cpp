@@ -98,7 +98,7 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
   };
   CHECK(scores(csv_a) == scores(read_all(run / "eval_b" / "per_image.csv")));
   CHECK(fs::exists(run / "eval_a" / "summary.json"));
-  CHECK_THAT(read_all(run / "eval_a" / "results.md"), Catch::Contains("| identity | 3 |"));
+  CHECK_THAT(read_all(run / "eval_a" / "results.md"), Catch::Contains("| identity | exact | 3 |"));
   size_t panels = 0;
   for (const auto& e : fs::directory_iterator(run / "eval_a" / "images"))
     panels += e.path().extension() == ".png";
@@ -111,13 +111,16 @@ TEST_CASE("evaluating a checkpoint twice gives identical numbers and all outputs
   std::stringstream rows(csv_a);
   std::string line;
   std::getline(rows, line);
-  REQUIRE(line == "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points");
+  REQUIRE(
+      line ==
+      "human,frame,view,psnr,ssim,lpips,seconds,points,culled_points,evaluated_points,renderer");
   int checked = 0;
   while (std::getline(rows, line)) {
     std::vector<std::string> f;
     std::stringstream cells(line);
     for (std::string cell; std::getline(cells, cell, ',');) f.push_back(cell);
-    REQUIRE(f.size() == 10);
+    REQUIRE(f.size() == 11);
+    CHECK(f[10] == "exact");
     INFO(line);
     for (size_t i = 0; i < ds.size(); ++i) {
       const auto s = ds.load(i, 0);

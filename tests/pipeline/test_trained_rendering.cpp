@@ -167,7 +167,7 @@ TEST_CASE(
       std::vector<std::string> c;
       std::stringstream cells(line);
       for (std::string cell; std::getline(cells, cell, ',');) c.push_back(cell);
-      REQUIRE(c.size() == 10);
+      REQUIRE(c.size() == 11);
       rows[c[0] + "," + c[1] + "," + c[2]] = {std::stod(c[3]), std::stod(c[4]), std::stod(c[9])};
     }
     return rows;

@@ -148,12 +148,15 @@ class Dom(html.parser.HTMLParser):
         super().__init__()
         self.body, self.cells, self.cards, self.refs = {}, {}, [], []
         self.errors, self._cell, self._in_errors = '', None, False
+        self.ids = set()
         self.paired, self._row, self._tds = [], None, []
 
     def handle_starttag(self, tag, attrs):
         a = dict(attrs)
         if tag == 'body':
             self.body = a
+        if 'id' in a:
+            self.ids.add(a['id'])
         if tag == 'tr' and 'data-row' in a:
             self._row, self._tds = a['data-row'], []
         if tag == 'td' and self._row is not None:
@@ -222,7 +225,9 @@ def check_page(dom, folder, eval_dir, label):
     check({k: dom.cells.get(k) for k in expected} == expected,
           f'{label}: the scores table equals summary.json: {dom.cells} vs {expected}')
     lines = list(csv.reader(open(os.path.join(eval_dir, 'per_image.csv'), newline='')))[1:]
-    views = {f'{summary["setting"]}/{h}/{f}/{v}' for h, f, v, *_ in lines}
+    renderer = summary.get('renderer', 'exact')
+    views = {f'{summary["setting"]}/{renderer}/{h}/{f}/{v}' for h, f, v, *_ in lines}
+    check(dom.cells.get('renderer') == renderer, f'{label}: the scores table names the renderer {renderer!r}')
     check(len(dom.cards) == len(lines) == summary['images'] and {c['key'] for c in dom.cards} == views,
           f'{label}: the gallery holds every evaluated view ({len(dom.cards)} cards, {len(lines)} in per_image.csv)')
     psnrs = [c['psnr'] for c in dom.cards]
@@ -327,6 +332,27 @@ def main():
     lit = sum(max(abs(p[i] - BACKGROUND[i]) for i in range(3)) > 24 for p in pixels) / len(pixels)
     check(lit > 0.02, f'viewer (lit): the mesh covers {100 * lit:.1f}% of the canvas (> 2%)')
     chromium(browser, url, ['--window-size=1280,2400', f'--screenshot={os.path.join(shots, "page.png")}'])
+
+    # A baked evaluation: its own page names the renderer; beside the exact one, the two are
+    # never one table and the page says why.
+    baked_dir = os.path.join(run_dir, 'eval_baked')
+    run([f'{b}/transhuman-eval', *cfg, '--checkpoint', ckpt, '--out', baked_dir, '--setting', 'identity', '--limit', '4',
+         '--baked', '--bake-voxel', '0.04', *data])
+    dom, _ = load_page(browser, os.path.join(baked_dir, 'index.html'), 'baked eval page')
+    check_page(dom, baked_dir, baked_dir, 'baked eval page')
+    check('mixed-renderers' not in dom.ids, 'baked eval page: one renderer, no note')
+    mixed = os.path.join(args.work, 'mixed')
+    run([f'{b}/transhuman-report', 'page', '--out', mixed, '--eval', eval_dir, '--eval', baked_dir, '--title', 'exact and baked'])
+    dom, _ = load_page(browser, os.path.join(mixed, 'index.html'), 'mixed page')
+    check('mixed-renderers' in dom.ids and 'scores-table' not in dom.ids,
+          'mixed page: exact and baked scores in separate tables, with the note saying why')
+    shown = {c['key'].split('/')[1] for c in dom.cards}
+    check('gallery-renderer' in dom.ids and len(shown) == 1,
+          f'mixed page: the gallery ranks one renderer\'s views at a time (shown: {sorted(shown)})')
+    chromium(browser, 'file://' + os.path.abspath(os.path.join(baked_dir, 'index.html')),
+             ['--window-size=1280,1400', f'--screenshot={os.path.join(shots, "baked_eval.png")}'])
+    chromium(browser, 'file://' + os.path.abspath(os.path.join(mixed, 'index.html')),
+             ['--window-size=1280,1400', f'--screenshot={os.path.join(shots, "mixed.png")}'])
 
     # An ablation page of two rows: the final checkpoint as `full`, the first epoch's as `early`.
     abl = os.path.join(args.work, 'ablations')

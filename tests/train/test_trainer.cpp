@@ -148,7 +148,8 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
   auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(captured);
   const auto c = tiny_config();
   const auto smpl = th::data::load_body_model(c.data);
-  const th::data::Dataset val(c.data, c.data.test_setting, th::data::Dataset::Mode::Test, smpl);
+  const auto val = std::make_shared<const th::data::Dataset>(c.data, c.data.test_setting,
+                                                             th::data::Dataset::Mode::Test, smpl);
   th::model::TransHuman model(c.model);
   {
     // The failure users of the reference code report: density negative everywhere.
@@ -159,7 +160,32 @@ TEST_CASE("a collapsed model's empty validation renders are reported", "[train]"
   const fs::path dir = th::test::scratch_dir("train_collapse");
   th::pipeline::JsonlWriter log(dir / "metrics.jsonl");
   spdlog::default_logger()->sinks().push_back(sink);
-  th::train::validate(*model, c, val, tokens, smpl->v_template, torch::kCPU, dir, 1, log, 0);
+  th::train::validate(model, c, val, tokens, smpl->v_template, torch::kCPU, dir, 1, log, 0);
   spdlog::default_logger()->sinks().pop_back();
   CHECK_THAT(captured.str(), Catch::Contains("collapsed") && Catch::Contains("Try:"));
+}
+
+TEST_CASE("validation from bakes names its renderer and its time in the metrics", "[train][bake]") {
+  const auto exact = tiny_config(),
+             baked = tiny_config({"train.val_renderer=baked", "eval.bake_voxel=0.04"});
+  const auto smpl = th::data::load_body_model(exact.data);
+  const auto val = std::make_shared<const th::data::Dataset>(exact.data, exact.data.test_setting,
+                                                             th::data::Dataset::Mode::Test, smpl);
+  th::model::TransHuman model(exact.model);
+  th::pipeline::Tokens tokens(*model, smpl->v_template);
+  const fs::path dir = th::test::scratch_dir("train_val_baked");
+  {
+    th::pipeline::JsonlWriter log(dir / "metrics.jsonl");
+    th::train::validate(model, exact, val, tokens, smpl->v_template, torch::kCPU, dir, 1, log, 5);
+    th::train::validate(model, baked, val, tokens, smpl->v_template, torch::kCPU, dir, 2, log, 10);
+  }
+  CHECK(model->is_training());  // left as training found it
+  std::ifstream in(dir / "metrics.jsonl");
+  std::string first, second;
+  std::getline(in, first);
+  std::getline(in, second);
+  CHECK_THAT(first, Catch::Contains("\"val_renderer\": \"exact\""));
+  CHECK_THAT(second, Catch::Contains("\"val_renderer\": \"baked 4 cm\"") &&
+                         Catch::Contains("\"val_psnr\": ") && Catch::Contains("\"val_seconds\""));
+  CHECK(fs::exists(dir / "epoch_0002_0.png"));
 }

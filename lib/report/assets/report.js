@@ -149,24 +149,49 @@
 
   // ---- evaluation / demo sections -------------------------------------------------------
 
+  // What rendered an evaluation's views (summaries written before it was recorded: exact).
+  const rendererOf = (s) => s.renderer || 'exact';
+  const MIXED_RENDERERS = 'These scores come from different renderers: a baked score approximates ' +
+    'the exact renderer\'s (the bake fixes each point\'s colour and samples the field on a grid; ' +
+    'docs/METHOD.md, section 7.1), so scores of different renderers are not compared row by row.';
+
+  // One table per renderer: scores of the exact renderer and of a bake never share a table.
   function scoresSection(evals) {
-    const head = el('tr', {}, ['setting', 'images', 'PSNR ↑', 'SSIM ↑', 'LPIPS ↓', 's / image', 'files'].map((h) => el('th', {}, h)));
-    const rows = evals.map((e) => {
+    const groups = new Map();
+    evals.forEach((e) => {
       const s = JSON.parse(e.summary);
-      const files = Object.entries(e.files).map(([name, href]) => el('a', { href }, name));
-      return el('tr', { 'data-setting': s.setting },
-        el('td', {}, s.setting),
-        el('td', { 'data-key': 'images' }, s.images),
-        el('td', { 'data-key': 'psnr' }, fmt(s.psnr, 2)),
-        el('td', { 'data-key': 'ssim' }, fmt(s.ssim, 3)),
-        el('td', { 'data-key': 'lpips' }, fmt(lpipsOf(s), 3)),
-        el('td', {}, fmt(s.seconds_per_image, 2)),
-        el('td', { class: 'files' }, files));
+      const r = rendererOf(s);
+      if (!groups.has(r)) groups.set(r, []);
+      groups.get(r).push({ e, s });
     });
-    const note = evals.some((e) => lpipsOf(JSON.parse(e.summary)) === null)
-      ? el('p', { class: 'note' }, 'LPIPS n/a: no LPIPS weights were available (scripts/export_lpips.py makes them).')
-      : null;
-    return section('scores', 'Scores', el('table', { id: 'scores-table' }, el('thead', {}, head), el('tbody', {}, rows)), note);
+    const table = (list) => {
+      const head = el('tr', {}, ['setting', 'renderer', 'images', 'PSNR ↑', 'SSIM ↑', 'LPIPS ↓', 's / image', 'files']
+        .map((h) => el('th', {}, h)));
+      const rows = list.map(({ e, s }) => {
+        const files = Object.entries(e.files).map(([name, href]) => el('a', { href }, name));
+        return el('tr', { 'data-setting': s.setting, 'data-renderer': rendererOf(s) },
+          el('td', {}, s.setting),
+          el('td', { 'data-key': 'renderer' }, rendererOf(s)),
+          el('td', { 'data-key': 'images' }, s.images),
+          el('td', { 'data-key': 'psnr' }, fmt(s.psnr, 2)),
+          el('td', { 'data-key': 'ssim' }, fmt(s.ssim, 3)),
+          el('td', { 'data-key': 'lpips' }, fmt(lpipsOf(s), 3)),
+          el('td', {}, fmt(s.seconds_per_image, 2)),
+          el('td', { class: 'files' }, files));
+      });
+      return el('table', { class: 'scores-table', id: groups.size === 1 ? 'scores-table' : null },
+        el('thead', {}, head), el('tbody', {}, rows));
+    };
+    const parts = [];
+    if (groups.size > 1) {
+      parts.push(el('p', { class: 'note', id: 'mixed-renderers' }, MIXED_RENDERERS));
+      groups.forEach((list, r) => parts.push(el('h3', {}, `Renderer: ${r}`), table(list)));
+    } else {
+      groups.forEach((list) => parts.push(table(list)));
+    }
+    if (evals.some((e) => lpipsOf(JSON.parse(e.summary)) === null))
+      parts.push(el('p', { class: 'note' }, 'LPIPS n/a: no LPIPS weights were available (scripts/export_lpips.py makes them).'));
+    return section('scores', 'Scores', ...parts);
   }
 
   function trainingSection(text) {
@@ -180,10 +205,12 @@
         lineChart([{ name: 'training loss', points: xy(steps, 'loss') }], 'step', 'loss'),
         lineChart([
           { name: 'training batch PSNR', points: xy(steps, 'psnr') },
-          { name: 'validation PSNR', points: xy(val, 'val_psnr'), color: COLORS[1], dots: true },
+          { name: `validation PSNR (${[...new Set(val.map((l) => l.val_renderer || 'exact'))].join(' + ')})`,
+            points: xy(val, 'val_psnr'), color: COLORS[1], dots: true },
         ], 'step', 'PSNR (dB)')),
       last ? el('p', { class: 'note' }, `${steps.length} logged steps, last step ${last.step}` +
-        (val.length ? `; last validation PSNR ${fmt(val[val.length - 1].val_psnr, 2)} dB` : '')) : null);
+        (val.length ? `; last validation PSNR ${fmt(val[val.length - 1].val_psnr, 2)} dB ` +
+          `(${val[val.length - 1].val_renderer || 'exact'} renderer)` : '')) : null);
   }
 
   // The orbit as a flip-book of its frames (browsers do not play the MPEG-4 Part 2 video
@@ -292,29 +319,35 @@
   function gallerySection(evals) {
     const items = [];
     for (const e of evals) {
-      const setting = JSON.parse(e.summary).setting;
-      parseCsv(e.per_image).forEach((r, i) => items.push({ r, setting, panel: e.panels[i] }));
+      const s = JSON.parse(e.summary);
+      parseCsv(e.per_image).forEach((r, i) => items.push({ r, setting: s.setting, renderer: r.renderer || rendererOf(s), panel: e.panels[i] }));
     }
     const grid = el('div', { class: 'gallery', id: 'gallery' });
-    const cards = items.map(({ r, setting, panel }) => el('figure', {
-      class: 'card', 'data-psnr': r.psnr, 'data-key': `${setting}/${imageKey(r)}`,
+    const cards = items.map(({ r, setting, renderer, panel }) => el('figure', {
+      class: 'card', 'data-psnr': r.psnr, 'data-key': `${setting}/${renderer}/${imageKey(r)}`, 'data-renderer': renderer,
     },
     panel ? el('a', { href: panel }, el('img', { src: panel, loading: 'lazy', alt: imageKey(r) })) : el('p', { class: 'note' }, 'no panel saved'),
     el('figcaption', {}, `${r.human} · frame ${r.frame} · view ${r.view} · `, el('b', {}, `${fmt(r.psnr, 2)} dB`),
-      ` · SSIM ${fmt(r.ssim, 3)}`, finite(r.lpips) ? ` · LPIPS ${fmt(r.lpips, 3)}` : '')));
+      ` · SSIM ${fmt(r.ssim, 3)}`, finite(r.lpips) ? ` · LPIPS ${fmt(r.lpips, 3)}` : '', ` · ${renderer}`)));
     const order = el('select', { id: 'gallery-order' },
       el('option', { value: 'worst' }, 'PSNR, worst first'),
       el('option', { value: 'best' }, 'PSNR, best first'),
       el('option', { value: 'name' }, 'person, frame, view'));
+    // Scores of different renderers are never ranked together: one renderer's views at a time.
+    const renderers = [...new Set(items.map((i) => i.renderer))];
+    const shown = renderers.length > 1
+      ? el('select', { id: 'gallery-renderer' }, renderers.map((r) => el('option', { value: r }, r)))
+      : null;
     const sortBy = (how) => {
-      const sorted = cards.slice();
+      const sorted = cards.filter((c) => !shown || c.dataset.renderer === shown.value);
       if (how !== 'name') sorted.sort((a, b) => (a.dataset.psnr - b.dataset.psnr) * (how === 'worst' ? 1 : -1));
       grid.replaceChildren(...sorted);
     };
     order.addEventListener('change', () => sortBy(order.value));
+    if (shown) shown.addEventListener('change', () => sortBy(order.value));
     sortBy('worst');
     return section('gallery-section', `Every evaluated view (${cards.length})`,
-      el('p', { class: 'controls' }, 'order: ', order,
+      el('p', { class: 'controls' }, shown ? ['renderer: ', shown, ' '] : null, 'order: ', order,
         el('span', { class: 'note' }, ' · each panel: prediction | ground truth | input views | error map')),
       grid);
   }
@@ -356,25 +389,31 @@
 
   function ablationPage(rows) {
     const parsed = rows.map((r) => ({ ...r, s: JSON.parse(r.summary), images: parseCsv(r.per_image) }));
-    const head = el('tr', {}, ['row', 'what changes', 'images', 'PSNR ↑', 'SSIM ↑', 'LPIPS ↓', 'train time', 'page']
+    const head = el('tr', {}, ['row', 'what changes', 'renderer', 'images', 'PSNR ↑', 'SSIM ↑', 'LPIPS ↓', 'train time', 'page']
       .map((h) => el('th', {}, h)));
-    const body = parsed.map((r) => el('tr', { 'data-setting': r.name },
+    const renderers = new Set(parsed.map((r) => rendererOf(r.s)));
+    const body = parsed.map((r) => el('tr', { 'data-setting': r.name, 'data-renderer': rendererOf(r.s) },
       el('td', {}, el('code', {}, r.name)), el('td', { class: 'text' }, r.description),
+      el('td', { 'data-key': 'renderer' }, rendererOf(r.s)),
       el('td', { 'data-key': 'images' }, r.s.images), el('td', { 'data-key': 'psnr' }, fmt(r.s.psnr, 2)),
       el('td', { 'data-key': 'ssim' }, fmt(r.s.ssim, 3)), el('td', { 'data-key': 'lpips' }, fmt(lpipsOf(r.s), 3)),
       el('td', {}, finite(r.train_seconds) ? `${(r.train_seconds / 60).toFixed(1)} min` : 'n/a'),
       el('td', {}, r.page ? el('a', { href: r.page }, 'open') : '')));
     const out = [section('scores', `Rows (setting ${parsed[0].s.setting})`,
+      renderers.size > 1 ? el('p', { class: 'note', id: 'mixed-renderers' }, MIXED_RENDERERS +
+        ' Bars and paired differences below compare rows of one renderer only where marked.') : null,
       el('table', { id: 'scores-table' }, el('thead', {}, head), el('tbody', {}, body)))];
     const metrics = [['psnr', 'PSNR (dB) ↑', 2], ['ssim', 'SSIM ↑', 3], ['lpips', 'LPIPS ↓', 3]];
     out.push(section('bars', 'Per metric', el('div', { class: 'charts' }, metrics.map(([key, title, digits]) =>
-      barChart(parsed.map((r) => ({ name: r.name, value: key === 'lpips' ? lpipsOf(r.s) : r.s[key] })), title, digits)))));
+      barChart(parsed.map((r) => ({ name: renderers.size > 1 ? `${r.name} (${rendererOf(r.s)})` : r.name, value: key === 'lpips' ? lpipsOf(r.s) : r.s[key] })), title, digits)))));
 
     const full = parsed.find((r) => r.name === 'full');
     if (full && parsed.length > 1) {
       const dhead = el('tr', {}, ['row', 'images paired', 'PSNR: full − row', 'full better', 'SSIM: full − row', 'full better',
         'LPIPS: full − row', 'full better', 'PSNR differences, sorted'].map((h) => el('th', {}, h)));
-      const drows = parsed.filter((r) => r !== full).map((r) => {
+      // Pairs of one renderer only: another renderer's difference is not the ablation's.
+      const other = parsed.filter((r) => r !== full && rendererOf(r.s) !== rendererOf(full.s));
+      const drows = parsed.filter((r) => r !== full && rendererOf(r.s) === rendererOf(full.s)).map((r) => {
         const cells = [el('td', {}, el('code', {}, r.name))];
         const ps = metrics.map(([key, , digits]) => [paired(full.images, r.images, key), digits]);
         cells.push(el('td', {}, ps[0][0] ? ps[0][0].n : 0));
@@ -388,6 +427,8 @@
       out.push(section('paired', 'Paired per image against full',
         el('p', { class: 'note' }, 'Each image of a row is compared with the same image (person, frame, view) under full. ' +
           'Strip: one bar per image, green where full is better, red where the row is.'),
+        other.length ? el('p', { class: 'note', id: 'paired-other-renderer' }, `Not paired (rendered by another ` +
+          `renderer than full's ${rendererOf(full.s)}): ${other.map((r) => `${r.name} (${rendererOf(r.s)})`).join(', ')}.`) : null,
         el('table', { id: 'paired-table' }, el('thead', {}, dhead), el('tbody', {}, drows))));
     } else {
       out.push(el('p', { class: 'note' }, 'No row named full: no paired differences.'));

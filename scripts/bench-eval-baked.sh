@@ -1,0 +1,220 @@
+#!/usr/bin/env bash
+# Baked evaluation against exact evaluation on the demo's trained checkpoint (trained first, as
+# scripts/demo.sh trains it, when runs/demo has none), each run a transhuman-eval process of its
+# own, writing bench/results/eval_baked.md:
+#   1. accuracy: the identity setting (108 views) scored exact and baked at 4, 2 and 1 cm, at the
+#      demo's 128x128 and at 512x512 (data.ratio=1), 16 samples per ray: per grid the mean and
+#      worst per-image difference to exact (PSNR, SSIM, LPIPS when eval.lpips_weights is given);
+#   2. speed of the demo's evaluation: exact and baked 2 cm alternating, twice;
+#   3. the paper's identity protocol (438 views at 512x512, 64 samples per ray: 73 frames of 6
+#      target views): exact fp32 and bf16 on the first TH_BENCH_EXACT_VIEWS views (default 12),
+#      baked 2 cm and 1 cm on all 108, each projected to 438 views from its measured times
+#      (per view; for the bakes per frame and per view), with the baked-minus-exact difference on
+#      the views both scored;
+#   4. validation while training: the demo's saved checkpoints ranked by exact and by baked 2 cm
+#      identity scores, and what one validation (train.val_views views) costs each way.
+# Runs for about 45 minutes on 2 cores; measure on an otherwise idle machine.
+#   scripts/bench-eval-baked.sh [SECTION...]   sections: accuracy speed protocol validation
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install-deps.sh
+bash scripts/build.sh transhuman-synth transhuman-train transhuman-eval
+data=data/synthetic
+run=${TH_DEMO_RUN:-runs/demo}
+work=${TH_BENCH_WORK:-runs/bench_eval_baked}
+exact_views=${TH_BENCH_EXACT_VIEWS:-12}
+sections=("$@")
+((${#sections[@]})) || sections=(accuracy speed protocol validation)
+build/apps/transhuman-synth --config configs/synth/default.yaml --out "$data"
+if [[ ! -f "$run/checkpoints/latest.pt" ]]; then
+  build/apps/transhuman-train --config configs/demo.yaml --out "$run" --force
+fi
+ckpt=$run/checkpoints/latest.pt
+mkdir -p "$work"
+log=$work/runs.tsv  # name, seconds, folder: one line per evaluation
+: >"$log"
+load() { cut -d' ' -f1-3 /proc/loadavg; }
+echo "load_start	$(load)" >"$work/load.txt"
+
+# evaluate NAME CHECKPOINT [transhuman-eval options and overrides...]: one timed evaluation.
+evaluate() {
+  local name=$1 checkpoint=$2
+  shift 2
+  local t0 t1
+  t0=$(date +%s.%N)
+  OMP_WAIT_POLICY=passive build/apps/transhuman-eval --config configs/demo.yaml --checkpoint "$checkpoint" \
+    --setting identity --out "$work/$name" --force "$@" >"$work/$name.log" 2>&1 ||
+    { tail -20 "$work/$name.log"; echo "bench-eval-baked: $name failed" >&2; exit 1; }
+  t1=$(date +%s.%N)
+  printf '%s\t%s\t%s\n' "$name" "$(echo "$t1 - $t0" | bc)" "$work/$name" >>"$log"
+  echo "$name: $(echo "$t1 - $t0" | bc | cut -c1-7) s" >&2
+}
+has() { [[ " ${sections[*]} " == *" $1 "* ]]; }
+
+if has accuracy; then
+  evaluate a128_exact "$ckpt"
+  for v in 0.04 0.02 0.01; do evaluate "a128_baked_$v" "$ckpt" --baked --bake-voxel $v; done
+  evaluate a512_exact "$ckpt" data.ratio=1
+  for v in 0.04 0.02 0.01; do evaluate "a512_baked_$v" "$ckpt" --baked --bake-voxel $v data.ratio=1; done
+fi
+if has speed; then
+  for round in 1 2; do
+    evaluate "s128_exact_$round" "$ckpt"
+    evaluate "s128_baked_$round" "$ckpt" --baked
+    evaluate "s512_baked_$round" "$ckpt" --baked data.ratio=1
+  done
+  evaluate s512_exact_2 "$ckpt" data.ratio=1  # beside a512_exact: the exact 512 run twice
+fi
+if has protocol; then
+  p=(data.ratio=1 render.samples=64)
+  evaluate p_exact_fp32 "$ckpt" "${p[@]}" --limit "$exact_views" --precision fp32
+  evaluate p_exact_bf16 "$ckpt" "${p[@]}" --limit "$exact_views" --precision bf16
+  evaluate p_baked_0.02 "$ckpt" "${p[@]}" --baked --bake-voxel 0.02
+  evaluate p_baked_0.01 "$ckpt" "${p[@]}" --baked --bake-voxel 0.01
+fi
+if has validation; then
+  for c in "$run"/checkpoints/epoch_*.pt; do
+    e=$(basename "$c" .pt)
+    evaluate "v_exact_$e" "$c"
+    evaluate "v_baked_$e" "$c" --baked
+  done
+fi
+echo "load_end	$(load)" >>"$work/load.txt"
+
+/usr/bin/python3 - "$work" "$exact_views" "$(git rev-parse --short HEAD)$(git diff --quiet || echo +)" <<'PY'
+import csv, json, os, statistics, sys, time
+work, exact_views, commit = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+runs = {}
+for line in open(os.path.join(work, 'runs.tsv')):
+    name, seconds, folder = line.rstrip('\n').split('\t')
+    runs[name] = {'seconds': float(seconds), 'folder': folder}
+load = dict(l.rstrip('\n').split('\t') for l in open(os.path.join(work, 'load.txt')))
+def rows(name):
+    return {(r['human'], r['frame'], r['view']): r for r in csv.DictReader(open(os.path.join(runs[name]['folder'], 'per_image.csv')))}
+def summary(name):
+    return json.load(open(os.path.join(runs[name]['folder'], 'summary.json')))
+def num(v):
+    try:
+        return float(v)
+    except ValueError:
+        return float('nan')
+def diff(a, b, key):
+    """Per-image b - a over the views both scored: mean, worst (largest magnitude)."""
+    ra, rb = rows(a), rows(b)
+    d = [num(rb[k][key]) - num(ra[k][key]) for k in ra if k in rb]
+    d = [x for x in d if x == x]
+    if not d:
+        return 'n/a', 'n/a', 0
+    return statistics.fmean(d), max(d, key=abs), len(d)
+def f(v, digits):
+    return v if isinstance(v, str) else f'{v:+.{digits}f}'
+cpu = next((l.split(':', 1)[1].strip() for l in open('/proc/cpuinfo') if l.startswith('model name')), 'unknown')
+out = [f'# Baked evaluation against exact ({time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())})', '',
+       f'Checkpoint runs/demo/checkpoints/latest.pt (configs/demo.yaml); setting identity; commit {commit}; '
+       f'processor {cpu}, {os.cpu_count()} cores; load average at start {load["load_start"]}, at the end {load["load_end"]}. '
+       'Each figure is one transhuman-eval process (scripts/bench-eval-baked.sh); seconds are wall time, '
+       'start-up (loading the data and the checkpoint) included.', '']
+lp = any(summary(n).get('lpips_available') == 'yes' for n in runs)
+if 'a128_exact' in runs:
+    out += ['## Accuracy: baked minus exact, per image, 16 samples per ray', '',
+            '| size | renderer | views | PSNR | PSNR diff: mean | worst | SSIM | SSIM diff: mean | worst | LPIPS diff: mean | worst | seconds |',
+            '|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for size in ('128', '512'):
+        e = f'a{size}_exact'
+        s = summary(e)
+        out.append(f'| {size}x{size} | exact | {s["images"]} | {s["psnr"]:.2f} | - | - | {s["ssim"]:.4f} | - | - | - | - | {runs[e]["seconds"]:.0f} |')
+        for v in ('0.04', '0.02', '0.01'):
+            b = f'a{size}_baked_{v}'
+            s = summary(b)
+            pm, pw, n = diff(e, b, 'psnr')
+            sm, sw, _ = diff(e, b, 'ssim')
+            lm, lw, _ = diff(e, b, 'lpips')
+            out.append(f'| {size}x{size} | {s["renderer"]} | {n} | {s["psnr"]:.2f} | {f(pm, 3)} | {f(pw, 3)} | {s["ssim"]:.4f} | '
+                       f'{f(sm, 4)} | {f(sw, 4)} | {f(lm, 4)} | {f(lw, 4)} | {runs[b]["seconds"]:.0f} |')
+    out += ['', 'LPIPS: ' + ('scored with eval.lpips_weights.' if lp else
+            'n/a: no LPIPS weights here (scripts/export_lpips.py needs torchvision\'s pretrained VGG), so only PSNR and SSIM are compared.'), '']
+if 's128_exact_1' in runs:
+    out += ['## Speed: the identity evaluation (108 views), 16 samples per ray, runs alternating', '',
+            '| size | renderer | round 1 s | round 2 s | median s | speed-up |', '|---|---|---|---|---|---|']
+    def med(names):
+        return statistics.median(runs[n]['seconds'] for n in names if n in runs)
+    e128 = med(['s128_exact_1', 's128_exact_2'])
+    b128 = med(['s128_baked_1', 's128_baked_2'])
+    e512 = med(['a512_exact', 's512_exact_2'])
+    b512 = med(['s512_baked_1', 's512_baked_2'])
+    g = lambda n: f'{runs[n]["seconds"]:.1f}' if n in runs else '-'
+    out.append(f'| 128x128 (the demo) | exact | {g("s128_exact_1")} | {g("s128_exact_2")} | {e128:.1f} | 1x |')
+    out.append(f'| 128x128 (the demo) | baked 2 cm | {g("s128_baked_1")} | {g("s128_baked_2")} | {b128:.1f} | {e128 / b128:.1f}x |')
+    out.append(f'| 512x512 | exact | {g("a512_exact")} | {g("s512_exact_2")} | {e512:.1f} | 1x |')
+    out.append(f'| 512x512 | baked 2 cm | {g("s512_baked_1")} | {g("s512_baked_2")} | {b512:.1f} | {e512 / b512:.1f}x |')
+    bake = [r for r in rows('s128_baked_1').values()]
+    out += ['', f'A baked run spends its time on 18 bakes (one per frame; a row\'s seconds hold its frame\'s bake on the frame\'s first view): '
+            f'{sum(num(r["seconds"]) for r in bake):.1f} s of rows at 128x128. The bake costs the same at any image size, '
+            'the exact render grows with the pixels: at 128x128 a frame\'s 6 exact views cost about as much as its bake.', '']
+if 'p_exact_fp32' in runs:
+    out += [f'## The paper\'s identity protocol: 438 views at 512x512, 64 samples per ray (73 frames x 6 views), projected', '',
+            '| renderer | precision | views run | seconds run | per view s | bake per frame s | march per view s | projected 438 views | PSNR diff to exact fp32: mean | worst | SSIM diff: mean |',
+            '|---|---|---|---|---|---|---|---|---|---|---|']
+    for name, prec in (('p_exact_fp32', 'fp32'), ('p_exact_bf16', 'bf16'), ('p_baked_0.02', 'fp32'), ('p_baked_0.01', 'fp32')):
+        if name not in runs:
+            continue
+        s = summary(name)
+        r = list(rows(name).values())
+        if name.startswith('p_exact'):
+            per_view = statistics.fmean(num(x['seconds']) for x in r)
+            startup = runs[name]['seconds'] - sum(num(x['seconds']) for x in r)
+            projected = startup + 438 * per_view
+            bake_s, march_s = '-', '-'
+        else:
+            firsts, rest = {}, []
+            for x in r:  # the first view of a frame holds its bake
+                k = (x['human'], x['frame'])
+                if k not in firsts:
+                    firsts[k] = num(x['seconds'])
+                else:
+                    rest.append(num(x['seconds']))
+            march = statistics.fmean(rest)
+            bake = statistics.fmean(firsts.values()) - march
+            startup = runs[name]['seconds'] - sum(num(x['seconds']) for x in r)
+            projected = startup + 73 * bake + 438 * march
+            per_view = sum(num(x['seconds']) for x in r) / len(r)
+            bake_s, march_s = f'{bake:.2f}', f'{march:.3f}'
+        if name == 'p_exact_fp32':
+            dm = dw = sm = '-'
+        else:
+            dm, dw, _ = diff('p_exact_fp32', name, 'psnr')
+            sm, _, _ = diff('p_exact_fp32', name, 'ssim')
+            dm, dw, sm = f(dm, 3), f(dw, 3), f(sm, 4)
+        out.append(f'| {s["renderer"]} | {prec} | {s["images"]} | {runs[name]["seconds"]:.0f} | {per_view:.2f} | {bake_s} | {march_s} | '
+                   f'{projected / 60:.1f} min | {dm} | {dw} | {sm} |')
+    out += ['', f'Exact runs score the first {exact_views} views (2 frames); baked runs all 108 (18 frames). Projection: the run\'s '
+            'start-up plus 438 times the mean view (exact), or plus 73 bakes and 438 marches (baked). The differences are over '
+            f'the {exact_views} views both renderers scored. The paper: 17 minutes on one V100 (64 samples), 9 minutes at 16.', '']
+val = sorted(n[len('v_exact_'):] for n in runs if n.startswith('v_exact_'))
+if val:
+    out += ['## Validation while training: ranking the demo\'s checkpoints', '',
+            '| checkpoint | exact PSNR | exact s | baked 2 cm PSNR | baked s | PSNR diff |', '|---|---|---|---|---|---|']
+    for e in val:
+        se, sb = summary('v_exact_' + e), summary('v_baked_' + e)
+        out.append(f'| {e} | {se["psnr"]:.2f} | {runs["v_exact_" + e]["seconds"]:.0f} | {sb["psnr"]:.2f} | {runs["v_baked_" + e]["seconds"]:.0f} | {sb["psnr"] - se["psnr"]:+.3f} |')
+    order = lambda kind: [e for e in sorted(val, key=lambda e: -summary(f'v_{kind}_{e}')['psnr'])]
+    same = order('exact') == order('baked')
+    out += ['', f'Ranking by exact PSNR: {", ".join(order("exact"))}; by baked: {", ".join(order("baked"))} '
+            f'({"the same" if same else "different"}).', '']
+    # One validation: train.val_views views spread over the split, each of another frame, so each
+    # view pays its frame: exact, a first view's seconds (its frame prepared); baked, a bake and a march.
+    def first_views(name):
+        seen, out_ = set(), []
+        for x in rows(name).values():
+            k = (x['human'], x['frame'])
+            if k not in seen:
+                seen.add(k)
+                out_.append(num(x['seconds']))
+        return statistics.fmean(out_)
+    last = val[-1]
+    ev, bv = first_views('v_exact_' + last), first_views('v_baked_' + last)
+    out += [f'One validation of the demo (train.val_views 2, each view of another frame), from the rows of {last}: '
+            f'exact {2 * ev:.2f} s, baked 2 cm {2 * bv:.2f} s.', '']
+open('bench/results/eval_baked.md', 'w').write('\n'.join(out) + '\n')
+print('\n'.join(out))
+PY
