@@ -9,6 +9,7 @@
 #include "app/app.hpp"
 #include "app/ranks.hpp"
 #include "app/summary.hpp"
+#include "core/runtime.hpp"
 #include "eval/evaluator.hpp"
 #include "report/report.hpp"
 
@@ -45,6 +46,12 @@ int main(int argc, char** argv) {
     if (resume && options.force)
       th::fail("--resume continues the evaluation in --out, --force replaces it: not both");
     options.resume = resume;
+    // Rows of another request are refused before the folder's config.yaml and log are written.
+    if (resume)
+      options.preflight = [&](const th::Config& c) {
+        th::eval::check_resume(c, th::runtime::select_device(c.device), model.checkpoint,
+                               options.out);
+      };
     if (baked) options.overrides.push_back("eval.renderer=baked");
     if (*voxel) options.overrides.push_back("eval.bake_voxel=" + fmt::format("{}", bake_voxel));
     if (limit >= 0) options.overrides.push_back("eval.limit=" + std::to_string(limit));

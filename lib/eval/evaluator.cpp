@@ -236,6 +236,26 @@ std::string read_rows(const fs::path& file,
 
 }  // namespace
 
+void check_resume(const Config& config, const torch::Device& device, const fs::path& checkpoint,
+                  const fs::path& out_dir) {
+  const fs::path request_file = out_dir / "request.yaml";
+  if (!fs::exists(request_file))
+    fail("cannot resume the evaluation in '", out_dir.string(),
+         "': it holds no request.yaml (it is not an evaluation's folder, or one that never "
+         "started); use another --out, or --force to evaluate anew");
+  const std::string renderer = config.eval.renderer == ViewRenderer::baked
+                                   ? bake::baked_label(config.eval.bake_voxel)
+                                   : "exact";
+  const std::string before = io::read_file(request_file);
+  const std::string wanted =
+      describe(config, device, inference::checkpoint_identity(checkpoint), renderer);
+  if (before == wanted) return;
+  const std::string changed = inference::request_differences(before, wanted, "rows");
+  fail("cannot resume the evaluation in '", out_dir.string(),
+       "': its rows were made by another request", changed.empty() ? "" : ": " + changed, " (see ",
+       request_file.string(), "); use another --out, or --force to evaluate anew");
+}
+
 EvalSummary evaluate(const Config& config, const torch::Device& device, const fs::path& checkpoint,
                      const fs::path& out_dir, dist::Communicator* comm, bool resume) {
   const std::string setting = config.eval.setting;
@@ -280,17 +300,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     const fs::path request_file = out_dir / "request.yaml";
     const std::string wanted = describe(config, device, checkpoint_id, renderer);
     if (resume) {
-      if (!fs::exists(request_file))
-        fail("cannot resume the evaluation in '", out_dir.string(),
-             "': it holds no request.yaml (it is not an evaluation's folder, or one that never "
-             "started); use another --out, or --force to evaluate anew");
-      const std::string before = io::read_file(request_file);
-      if (before != wanted) {
-        const std::string changed = inference::request_differences(before, wanted, "rows");
-        fail("cannot resume the evaluation in '", out_dir.string(),
-             "': its rows were made by another request", changed.empty() ? "" : ": " + changed,
-             " (see ", request_file.string(), "); use another --out, or --force to evaluate anew");
-      }
+      check_resume(config, device, checkpoint, out_dir);
       std::vector<std::tuple<std::string, int, int>> items;
       for (size_t i = 0; i < n; ++i) {
         const auto& it = dataset->item(i);

@@ -66,6 +66,12 @@ EvalSummary evaluate(const Config& config, const torch::Device& device,
                      const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir,
                      dist::Communicator* comm = nullptr, bool resume = false);
 
+// The check of evaluate(resume = true) alone, before anything is written (transhuman-eval runs
+// it before its run folder is touched): th::Error unless `out_dir` holds a request.yaml equal to
+// this evaluation's, naming the keys that differ.
+void check_resume(const Config& config, const torch::Device& device,
+                  const std::filesystem::path& checkpoint, const std::filesystem::path& out_dir);
+
 // Which of a setting's first `n` items each of `ranks` ranks evaluates: the items of one
 // (person, frame) stay together when `reuse_frames` (their preparation is shared), each frame
 // costing its views plus a preparation of a quarter view; whole frames go largest first to the

@@ -6,8 +6,9 @@
 #   - one bake per frame: the log counts the frames baked;
 #   - over 2 ranks the baked rows equal one process's, resumed over 2 ranks too;
 #   - --resume continues an evaluation cut short (rows.jsonl) with the same rows, and is refused
-#     (exit 2, naming the renderer) when the folder's rows were made by another renderer; a used
-#     folder without --resume is refused and the message offers --resume.
+#     (exit 2, naming the renderer, the folder untouched) when the folder's rows were made by
+#     another renderer; a used folder without --resume is refused and the message offers
+#     --resume.
 #
 #   tests/apps/check_eval_baked.sh APPS_DIR TINY_DATASET CHECKPOINT
 set -euo pipefail
@@ -73,6 +74,7 @@ set +e
 "${eval[@]}" --baked --resume --out "$work/exact" > "$work/mixed.log" 2>&1; rc=$?
 set -e
 refused "$rc" "$work/mixed.log" "renderer (rows: exact, now: baked 2 cm)" "a baked resume of exact rows"
+grep -q "^  renderer: exact" "$work/exact/config.yaml" || fail "the refused resume rewrote the folder's config.yaml"
 set +e
 "${eval[@]}" --out "$work/exact" > "$work/used.log" 2>&1; rc=$?
 set -e
