@@ -2,6 +2,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "bake/bake.hpp"
 #include "body/grouping.hpp"
 #include "body/smpl.hpp"
 #include "core/error.hpp"
@@ -69,6 +70,12 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
     spdlog::info("  parameters {:<44} {:>11}", p.module, with_commas(p.count));
   spdlog::info("render: {} samples/ray | progressive {} | chunk {} points", c.render.samples,
                c.render.progressive, c.render.chunk_points);
+  auto renderer = [&](ViewRenderer r) {
+    return r == ViewRenderer::baked ? bake::baked_label(c.eval.bake_voxel) : std::string("exact");
+  };
+  spdlog::info(
+      "views scored by: evaluation {} (eval.renderer) | validation {} (train.val_renderer)",
+      renderer(c.eval.renderer), renderer(c.train.val_renderer));
   model::select_products(c.precision, c.fp32_products, runtime::select_device(c.device));
   spdlog::info(
       "train: {} epochs x {} iters | lr {} (warm-up {} epochs, cosine to {}) | clip {} | "
