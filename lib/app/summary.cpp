@@ -70,9 +70,7 @@ void print_summary(const RunContext& ctx, bool dry_run, const std::string& check
     spdlog::info("  parameters {:<44} {:>11}", p.module, with_commas(p.count));
   spdlog::info("render: {} samples/ray | progressive {} | chunk {} points", c.render.samples,
                c.render.progressive, c.render.chunk_points);
-  auto renderer = [&](ViewRenderer r) {
-    return r == ViewRenderer::baked ? bake::baked_label(c.eval.bake_voxel) : std::string("exact");
-  };
+  auto renderer = [&](ViewRenderer r) { return bake::renderer_label(r, c.eval.bake_voxel); };
   spdlog::info(
       "views scored by: evaluation {} (eval.renderer) | validation {} (train.val_renderer)",
       renderer(c.eval.renderer), renderer(c.train.val_renderer));

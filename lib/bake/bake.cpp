@@ -348,7 +348,9 @@ std::vector<std::pair<std::string, std::string>> BakedViews::request_keys() cons
           {"bake.brick", std::to_string(options_.brick)}};
 }
 
-std::string baked_label(double voxel) { return fmt::format("baked {:g} cm", voxel * 100); }
+std::string renderer_label(ViewRenderer renderer, double voxel) {
+  return renderer == ViewRenderer::baked ? fmt::format("baked {:g} cm", voxel * 100) : "exact";
+}
 
 SampleBakes::SampleBakes(const inference::Session& session, const BakeOptions& options)
     : session_(session), options_(options) {

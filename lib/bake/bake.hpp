@@ -103,8 +103,9 @@ class BakedViews {
   BakeReport report_;
 };
 
-// What a score made through bakes says of its renderer: "baked 2 cm" (the voxel in centimetres).
-std::string baked_label(double voxel);
+// The renderer of scored views as every output names it: "exact", or "baked 2 cm" (the bake's
+// voxel in centimetres).
+std::string renderer_label(ViewRenderer renderer, double voxel);
 
 // Dataset views of loaded samples (evaluation, validation while training) rendered from bakes
 // of their frames: one bake per (person, frame, reference views), made when a sample of another

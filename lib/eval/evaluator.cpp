@@ -158,11 +158,21 @@ std::string row_line(int64_t item, const ImageScore& r) {
 // dataset's (person name, frame, view) of each view index). A line cut short by a stop is
 // dropped with a warning (its view is evaluated again); any other line that does not read, or
 // names a view the setting does not have at that index, is an error naming the file and line.
+// `setting_views`: the setting's views without eval.limit (the file's size is bounded by them).
 // Returns the lines kept (every row read, a line cut short left out), for the file to be
 // written again before rows are appended to it.
 std::string read_rows(const fs::path& file,
                       const std::vector<std::tuple<std::string, int, int>>& items,
-                      const std::string& renderer, std::vector<std::optional<ImageScore>>& rows) {
+                      const std::string& renderer, std::vector<std::optional<ImageScore>>& rows,
+                      size_t setting_views) {
+  // A row is a few hundred bytes: a file far beyond the setting's views is not this folder's.
+  constexpr uintmax_t kBytesPerRow = 4096;
+  const uintmax_t bytes = fs::file_size(file);
+  if (bytes > kBytesPerRow * (setting_views + 16))
+    fail("'", file.string(), "' holds ", bytes, " bytes, more than ", setting_views,
+         " rows can (at most ", kBytesPerRow,
+         " bytes each): not this evaluation's rows; remove it "
+         "to evaluate every view again, or --force");
   const std::string text = io::read_file(file);
   std::stringstream in(text);
   std::string line;
@@ -213,6 +223,8 @@ std::string read_rows(const fs::path& file,
     } catch (const nlohmann::json::exception& e) {
       fail(where, " is not a row of scores (", e.what(), ")");
     }
+    if (!std::isfinite(r.psnr) || !std::isfinite(r.ssim))
+      fail(where, ": its PSNR or SSIM is not a finite number");
     if (r.renderer != renderer)
       fail(where, " was rendered by '", r.renderer, "', not '", renderer, "'");
     if (item < 0) fail(where, ": item ", item, " is negative");
@@ -243,9 +255,7 @@ void check_resume(const Config& config, const torch::Device& device, const fs::p
     fail("cannot resume the evaluation in '", out_dir.string(),
          "': it holds no request.yaml (it is not an evaluation's folder, or one that never "
          "started); use another --out, or --force to evaluate anew");
-  const std::string renderer = config.eval.renderer == ViewRenderer::baked
-                                   ? bake::baked_label(config.eval.bake_voxel)
-                                   : "exact";
+  const std::string renderer = bake::renderer_label(config.eval.renderer, config.eval.bake_voxel);
   const std::string before = io::read_file(request_file);
   const std::string wanted =
       describe(config, device, inference::checkpoint_identity(checkpoint), renderer);
@@ -260,7 +270,7 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
                      const fs::path& out_dir, dist::Communicator* comm, bool resume) {
   const std::string setting = config.eval.setting;
   const bool baked = config.eval.renderer == ViewRenderer::baked;
-  const std::string renderer = baked ? bake::baked_label(config.eval.bake_voxel) : "exact";
+  const std::string renderer = bake::renderer_label(config.eval.renderer, config.eval.bake_voxel);
   const auto smpl = data::load_body_model(config.data);
   auto dataset =
       std::make_shared<const data::Dataset>(config.data, setting, data::Dataset::Mode::Test, smpl);
@@ -306,9 +316,10 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
         const auto& it = dataset->item(i);
         items.emplace_back(dataset->humans()[size_t(it.human)]->name(), it.frame, it.target_view);
       }
-      io::write_file_atomic(journal_file, fs::exists(journal_file)
-                                              ? read_rows(journal_file, items, renderer, rows)
-                                              : std::string());
+      io::write_file_atomic(journal_file,
+                            fs::exists(journal_file)
+                                ? read_rows(journal_file, items, renderer, rows, dataset->size())
+                                : std::string());
     } else {
       io::write_file_atomic(request_file, wanted);
       io::write_file_atomic(journal_file, "");

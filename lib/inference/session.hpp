@@ -66,7 +66,7 @@ class Session {
   // views; `view` is the camera whose intrinsics and image size the output camera takes (METHOD
   // 7: target view 3). Throws th::Error for an out-of-range index.
   PreparedFrame prepare(int human, int frame, int view) const;
-  // Prepares the frame of a sample already loaded from this session's dataset (its person,
+  // Prepares the frame of a sample already loaded from the dataset above (its person,
   // frame and reference views).
   PreparedFrame prepare(data::Sample sample) const;
 

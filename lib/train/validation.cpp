@@ -22,7 +22,8 @@ double validate(model::TransHuman model, const Config& config,
   if (n == 0) return 0.0;
   model->eval();
   const bool baked = config.train.val_renderer == ViewRenderer::baked;
-  const std::string renderer = baked ? bake::baked_label(config.eval.bake_voxel) : "exact";
+  const std::string renderer =
+      bake::renderer_label(config.train.val_renderer, config.eval.bake_voxel);
   // The baked renderer: a session over the network as it is now, its frames baked.
   std::unique_ptr<inference::Session> session;
   std::unique_ptr<bake::SampleBakes> bakes;

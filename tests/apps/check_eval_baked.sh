@@ -8,7 +8,7 @@
 #   - --resume continues an evaluation cut short (rows.jsonl) with the same rows, and is refused
 #     (exit 2, naming the renderer, the folder untouched) when the folder's rows were made by
 #     another renderer; a used folder without --resume is refused and the message offers
-#     --resume.
+#     --resume; a NaN row and an oversized rows.jsonl are refused naming the file.
 #
 #   tests/apps/check_eval_baked.sh APPS_DIR TINY_DATASET CHECKPOINT
 set -euo pipefail
@@ -68,6 +68,18 @@ rm "$work/exact/per_image.csv" "$work/exact/summary.json"
 grep -q "resumed: 3 of 6 views already scored, 3 left" "$work/resume.log" || { cat "$work/resume.log"; fail "the resume did not keep 3 rows"; }
 grep -q "cut short" "$work/resume.log" || fail "the line cut short is not reported"
 diff <(rows "$work/exact.csv") <(rows "$work/exact/per_image.csv") || fail "resumed rows differ"
+
+# Rows that are not scores: a PSNR of null (NaN), a journal far larger than the setting's rows.
+cp -r "$work/exact" "$work/nan" && sed -i '1s/"psnr": [^,]*/"psnr": null/' "$work/nan/rows.jsonl"
+set +e
+"${eval[@]}" --resume --out "$work/nan" > "$work/nan.log" 2>&1; rc=$?
+set -e
+refused "$rc" "$work/nan.log" "rows.jsonl' line 1: its PSNR or SSIM is not a finite number" "a NaN row"
+cp -r "$work/exact" "$work/huge" && truncate -s 100M "$work/huge/rows.jsonl"
+set +e
+"${eval[@]}" --resume --out "$work/huge" > "$work/huge.log" 2>&1; rc=$?
+set -e
+refused "$rc" "$work/huge.log" "holds 104857600 bytes, more than" "a 100 MB rows.jsonl"
 
 # Another renderer's rows are not resumed; a used folder needs --resume (or --force).
 set +e
