@@ -595,32 +595,8 @@ int run(int argc, char** argv) {
         if (!fastest) continue;
         const auto products = products_of(precisions[path]);
         const double limit = product_limit(products, chunk * scene.in.ref_images.size(0));
-        // The direct form (model.exact_shortcuts: false) does the paper-form work itself, so
-        // its rows are a true roofline; the fast form's rows are paper-form work per second.
-        render::Profile direct_profile;
-        double direct_points = 0;
-        {
-          ModelConfig direct_mc = mc;
-          direct_mc.exact_shortcuts = false;
-          torch::manual_seed(1);
-          model::TransHuman direct(direct_mc);
-          direct->train();
-          direct->set_products(products);
-          torch::NoGradGuard ng;
-          const auto cache = direct->prepare(scene.in, rc.cull_distance);
-          direct->forward(cache, pts.narrow(0, 0, chunk), dirs.narrow(0, 0, chunk));  // warm-up
-          direct->set_profile(&direct_profile);
-          const auto t0 = Clock::now();
-          while (seconds_since(t0) < min_time)
-            for (int64_t b = 0; b + chunk <= pts.size(0); b += chunk) {
-              direct->forward(cache, pts.narrow(0, b, chunk), dirs.narrow(0, b, chunk));
-              direct_points += double(chunk);
-            }
-          direct->set_profile(nullptr);
-        }
         const std::pair<const char*, std::pair<const render::Profile*, double>> forms[] = {
-            {"fast", {&fastest->profile, fastest->fwd * fastest->fwd_s}},
-            {"direct", {&direct_profile, direct_points}}};
+            {"fast", {&fastest->profile, fastest->fwd * fastest->fwd_s}}};
         for (const auto& [form, measured] : forms)
           for (const auto& [stage, per_point] : flops) {
             const auto it = measured.first->seconds.find(stage);
@@ -634,11 +610,10 @@ int run(int argc, char** argv) {
       }
       r.line("");
       r.line(
-          "fast: the default form (model.exact_shortcuts: true: folded weights, readouts, fc_0 on "
-          "the tokens), which does less than the paper-form work, so its GFLOP/s is paper-form "
-          "work per second and may exceed the limit. direct: model.exact_shortcuts: false, which "
-          "does that work, so its share is the distance from the limit. Sampling reads memory and "
-          "does no products: the product's limit is not its limit.");
+          "fast: the form that runs (folded weights, readouts, fc_0 on the tokens, METHOD 9), "
+          "which does less than the paper-form work, so its GFLOP/s is paper-form work per second "
+          "and may exceed the limit. Sampling reads memory and does no products: the product's "
+          "limit is not its limit.");
       r.line("");
     }
   }

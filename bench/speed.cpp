@@ -8,10 +8,10 @@
 //   eval   the evaluation of the config's setting, every image (transhuman-eval's path).
 // Paths (--paths, the first is the reference of the speed-ups and differences):
 // "exact": the speed switches off (render.termination_transmittance=0, eval.reuse_frames=false,
-// render.train_recompute=always, model.readout_windows=false), fp32 products through BLAS and
-// glibc's malloc defaults, except for the changes that have no switch because they only make
-// the same arithmetic faster (the vectorised attention and DPaRF loops, colour without a row
-// copy, the project's kernels compiled with OpenMP).
+// render.train_recompute=always), fp32 products through BLAS and glibc's malloc defaults, except
+// for the changes that have no switch because they only make the same arithmetic faster or
+// round it otherwise (the vectorised attention and DPaRF loops, colour without a row copy, the
+// readout windows, the project's kernels compiled with OpenMP).
 // "blas": the config with precision=fp32 and fp32 products through BLAS.
 // "fp32", "bf16", "auto": the config with that precision (fp32 products as the config says).
 // "default": the config as it is.
@@ -61,8 +61,7 @@ namespace fs = std::filesystem;
 namespace {
 
 const std::vector<std::string> kExact{"render.termination_transmittance=0",
-                                      "eval.reuse_frames=false", "render.train_recompute=always",
-                                      "model.readout_windows=false"};
+                                      "eval.reuse_frames=false", "render.train_recompute=always"};
 
 // The config overrides of a path.
 std::vector<std::string> path_overrides(const std::string& path) {

@@ -108,7 +108,6 @@ struct DataConfig {
 struct EncoderConfig {
   std::string pretrained = "";
   BatchNormStats batchnorm = BatchNormStats::batch;
-  bool fast_sampling = true;
 };
 
 // model.grouping.kmeans_file's value that imports a reference checkpoint with token groups computed
@@ -163,8 +162,6 @@ struct ModelConfig {
   DPaRFConfig dparf;
   FDIConfig fdi;
   SPCConfig spc;
-  bool exact_shortcuts = true;
-  bool readout_windows = true;
 };
 
 struct RenderConfig {
@@ -284,12 +281,15 @@ void visit_fields(V& v, DataConfig& c) {
   v("prefetch", c.prefetch, config::in(1, 1024), "samples queued ahead");
 }
 // ---- model (METHOD 2.5, 3)
+// What the retired execution keys of model.* (how the network was evaluated, never what it
+// computes) say when a config still sets them.
+inline constexpr const char* kRetiredExecutionKey =
+    "the network always runs its fast forms (METHOD 9), chosen by device, precision and autograd";
 template <class V>
 void visit_fields(V& v, EncoderConfig& c) {
   v("pretrained", c.pretrained, "ResNet-18 weights (scripts/export_pretrained.py); empty: random");
   v.choice("batchnorm", c.batchnorm, "BatchNorm statistics: the batch's [parity] or running");
-  v("fast_sampling", c.fast_sampling,
-    "sample the low-resolution maps directly, no (V, 384, H, W) tensor (METHOD 3.1, 9)");
+  v.retired("fast_sampling", kRetiredExecutionKey);
 }
 template <class V>
 void visit_fields(V& v, GroupingConfig& c) {
@@ -348,12 +348,8 @@ void visit_fields(V& v, ModelConfig& c) {
   v("dparf", c.dparf, "DPaRF (METHOD 3.3)");
   v("fdi", c.fdi, "FDI (METHOD 3.4)");
   v("spc", c.spc, "the SPC + trilinear baseline");
-  v("exact_shortcuts", c.exact_shortcuts,
-    "METHOD 9 identities (per-level readouts, fc_0 on the tokens, folded layers); false: the "
-    "direct computation (slower; for checking)");
-  v("readout_windows", c.readout_windows,
-    "METHOD 9 readouts at full resolution on a rectangle around the body (inference, CPU); "
-    "false: per-level tables");
+  v.retired("exact_shortcuts", kRetiredExecutionKey);
+  v.retired("readout_windows", kRetiredExecutionKey);
 }
 // ---- rendering (METHOD 4)
 template <class V>

@@ -1,5 +1,7 @@
 #include "core/config_io.hpp"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -183,6 +185,14 @@ void apply_override(YAML::Node& root, const std::string& text) {
     nodes.push_back(child);
   }
   nodes.back()[keys.back()] = value;
+}
+
+void Reader::retired(const char* key, const char* why) {
+  seen_.insert(key);
+  const YAML::Node child = node_[key];
+  if (child.IsDefined())
+    spdlog::warn("config key '{}' is no longer read and is ignored: {}",
+                 detail::join_path(path_, key), why);
 }
 
 void Reader::check_unknown() const {

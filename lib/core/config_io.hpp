@@ -210,6 +210,10 @@ class Reader {
          "}");
   }
 
+  // A key that is no longer read (it never changed what a config computes): present, it is
+  // ignored with one warning naming it and `why`; absent, nothing happens.
+  void retired(const char* key, const char* why);
+
   // Throws naming the first key of the map that no field claimed (with the closest known key).
   void check_unknown() const;
   // Throws naming the key when `value` is not finite or outside `range` (with the key's `doc`).
@@ -276,6 +280,7 @@ class Writer {
   void choice(const char* key, const E& field, const char* = "") {
     node_[key] = name_of(field);
   }
+  void retired(const char*, const char*) {}
 
   template <class T>
   static YAML::Node to_node(const T& field) {
@@ -320,6 +325,7 @@ class Checker {
               const char* = "") {}
   template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
   void choice(const char*, const E&, const char* = "") {}
+  void retired(const char*, const char*) {}
 
   template <class T>
   static void check(const T& value, const std::string& path) {
@@ -388,6 +394,7 @@ class Lister {
     add(detail::join_path(path_, key), "one of {" + list + "}", YAML::Node(name_of(field)), Range{},
         doc);
   }
+  void retired(const char*, const char*) {}  // not a key any more: not listed
 
  private:
   void add(const std::string& path, const std::string& type, const YAML::Node& value,

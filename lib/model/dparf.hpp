@@ -38,38 +38,10 @@ class DPaRF {
 
   // xs: (N, 3) points in the SMPL frame. The nearest fields, their weights and the local
   // coordinates' encoding arguments in one pass per point (model/kernels/nearest_fields.hpp),
-  // then the coordinate encoding. query_tensors: the same formulas as tensor operations.
+  // then the coordinate encoding.
   FieldQuery query(const TokenFrames& frames, const torch::Tensor& xs) const;
-  FieldQuery query_tensors(const TokenFrames& frames, const torch::Tensor& xs) const;
-
-  // Local coordinates l_k = Rc(k)^T (xs - Oc(k)) of the fields in `index`: (N, Nk, 3).
-  static torch::Tensor local_coordinates(const TokenFrames& frames, const torch::Tensor& xs,
-                                         const torch::Tensor& index);
-
-  // The reference's h_v = sum_k w_k [T_v(k); g_k] (direct, no shortcut).
-  // tokens: (V, Nt, C) -> (N, V, C + G).
-  torch::Tensor features(const TokenFrames& frames, const torch::Tensor& tokens,
-                         const torch::Tensor& xs) const;
 
  private:
-  // The coordinate encoding (dparf.coordinate: relative [the paper's], absolute, none) of the
-  // tensor formulation, and per field g_k (N, Nk, G). Each use branches on the coordinate where
-  // it is made.
-  torch::Tensor coords_from_tensors(const TokenFrames& frames, const torch::Tensor& xs,
-                                    const FieldQuery& q) const;
-  torch::Tensor field_codes(const TokenFrames& frames, const torch::Tensor& xs,
-                            const torch::Tensor& index) const;
-  torch::Tensor no_field_codes(const TokenFrames&, const torch::Tensor& xs,
-                               const torch::Tensor& index) const;
-  torch::Tensor absolute_coords(const TokenFrames&, const torch::Tensor& xs,
-                                const FieldQuery&) const;
-  torch::Tensor absolute_field_codes(const TokenFrames&, const torch::Tensor& xs,
-                                     const torch::Tensor& index) const;
-  torch::Tensor relative_coords(const TokenFrames& frames, const torch::Tensor& xs,
-                                const FieldQuery& q) const;
-  torch::Tensor relative_field_codes(const TokenFrames& frames, const torch::Tensor& xs,
-                                     const torch::Tensor& index) const;
-
   DPaRFConfig config_;
   bool fused_;  // pe_rounding: fused [parity] (METHOD 3.3)
 };

@@ -20,13 +20,6 @@ void init_conv(torch::nn::Conv2d& c) {
   torch::nn::init::kaiming_normal_(c->weight, 0.0, torch::kFanOut, torch::kReLU);
 }
 
-torch::Tensor upsample(const torch::Tensor& x, int64_t H, int64_t W) {
-  return F::interpolate(x, F::InterpolateFuncOptions()
-                               .size(std::vector<int64_t>{H, W})
-                               .mode(torch::kBilinear)
-                               .align_corners(true));
-}
-
 // Channel ranges of the levels inside p_v: [0, 64), [64, 128), [128, 256); colour [256, 384).
 constexpr int64_t kLevelBegin[] = {0, 64, 128, 256};
 
@@ -252,15 +245,6 @@ EncodedViews EncoderImpl::forward(const torch::Tensor& images) {
   return enc;
 }
 
-torch::Tensor EncoderImpl::pixel_features(const EncodedViews& enc) const {
-  const auto H = enc.geometry.height, W = enc.geometry.width;
-  std::vector<torch::Tensor> parts;
-  for (const auto& l : enc.levels) parts.push_back(upsample(l, H, W));
-  if (upsample_color)
-    parts.push_back(torch::conv2d(enc.images, upsample_color->weight, upsample_color->bias));
-  return torch::cat(parts, 1);
-}
-
 torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                                  const Taps& image_taps) const {
   // level_taps: stacked taps (9 per level, 4 for a level of the image's size); split them back.
@@ -371,14 +355,6 @@ torch::Tensor EncoderImpl::paint(const EncodedViews& enc, const torch::Tensor& u
          visibility.unsqueeze(-1).to(holder.device(), holder.scalar_type());
 }
 
-torch::Tensor EncoderImpl::paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
-                                        const torch::Tensor& visibility) const {
-  const auto holder = torch::conv2d(pixel_features(enc), reduction_layer->weight,
-                                    reduction_layer->bias);  // (V, 192, H, W)
-  const auto sampled = grid_sample_pixels(holder, uv.permute({1, 0, 2})).permute({1, 0, 2});
-  return sampled * visibility.unsqueeze(-1).to(sampled.device(), sampled.scalar_type());
-}
-
 void EncoderImpl::load_resnet_state(const std::map<std::string, torch::Tensor>& state,
                                     const std::string& source) {
   torch::NoGradGuard no_grad;
@@ -394,21 +370,6 @@ void EncoderImpl::load_resnet_state(const std::map<std::string, torch::Tensor>& 
     if (b.key().find("num_batches_tracked") != std::string::npos && !state.count(b.key())) continue;
     assign(b.key(), b.value());
   }
-}
-
-torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv) {
-  TORCH_CHECK(map.dim() == 4, "map must be (V, C, H, W), got ", map.sizes());
-  TORCH_CHECK(uv.dim() == 3 && uv.size(1) == map.size(0) && uv.size(2) == 2, "uv must be (N, ",
-              map.size(0), ", 2), got ", uv.sizes());
-  const auto H = map.size(2), W = map.size(3);
-  const auto scale = torch::tensor({2.0 / (W - 1), 2.0 / (H - 1)}, uv.options());
-  const auto grid = (uv * scale - 1).permute({1, 0, 2}).unsqueeze(1);  // (V, 1, N, 2)
-  const auto out = F::grid_sample(map, grid,
-                                  F::GridSampleFuncOptions()
-                                      .mode(torch::kBilinear)
-                                      .padding_mode(torch::kBorder)
-                                      .align_corners(true));
-  return out.squeeze(2).permute({2, 0, 1});  // (N, V, C)
 }
 
 }  // namespace th::model

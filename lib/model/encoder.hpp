@@ -4,9 +4,9 @@
 // painting of the body.
 //
 // The pixel feature is the concatenation of three bilinearly upsampled ResNet levels and a 1x1
-// convolution of the raw image. It is never materialised at full resolution on the fast path:
-// sampling goes through model/sampling.hpp (exact), and per-pixel linear layers that follow p_v
-// are applied to each level before sampling (METHOD 9), see PixelReadout.
+// convolution of the raw image. It is never materialised at full resolution: sampling goes
+// through model/sampling.hpp (exact), and per-pixel linear layers that follow p_v are applied to
+// each level before sampling (METHOD 9), see PixelReadout.
 
 #include <torch/torch.h>
 
@@ -148,8 +148,6 @@ class EncoderImpl : public torch::nn::Module {
 
   int64_t pixel_channels() const { return upsample_color ? 384 : 256; }
 
-  // The full-resolution pixel feature (V, 384, H, W) of the reference (direct path, tests).
-  torch::Tensor pixel_features(const EncodedViews& enc) const;
   // p_v at M points without materialising it; returns (M, 384).
   torch::Tensor sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                       const Taps& image_taps) const;
@@ -163,9 +161,6 @@ class EncoderImpl : public torch::nn::Module {
   // the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, holder channels).
   torch::Tensor paint(const EncodedViews& enc, const torch::Tensor& uv,
                       const torch::Tensor& visibility) const;
-  // The same the reference's way: materialise reduction(pixel_features) and grid_sample it.
-  torch::Tensor paint_direct(const EncodedViews& enc, const torch::Tensor& uv,
-                             const torch::Tensor& visibility) const;
 
   // Loads torchvision resnet18 weights (names conv1.weight, bn1.running_mean, layer1.0...;
   // layer3/layer4/fc are ignored). Throws th::Error naming a missing or mis-shaped key.
@@ -177,9 +172,5 @@ class EncoderImpl : public torch::nn::Module {
       upsample_color{nullptr};  // upsample_color: null w/o RGB
 };
 TORCH_MODULE(Encoder);
-
-// grid_sample(bilinear, border, align_corners=true) of maps at pixel coordinates, with the
-// reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
-torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv);
 
 }  // namespace th::model

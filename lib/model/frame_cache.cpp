@@ -8,26 +8,16 @@ void FrameGeometry::visit(const TensorVisitor& fn) {
   for (auto* t : {&K, &R, &T, &Rh, &Th}) fn(*t, nullptr);
 }
 
-void PixelLevels::visit(const TensorVisitor& fn) {
-  for (auto& level : enc.levels) fn(level, nullptr);
-  fn(enc.images, nullptr);
-}
-
 void PixelReadouts::visit(const TensorVisitor& fn) {
   alpha.visit(fn);
   color.visit(fn);
 }
 
 void WindowReadouts::visit(const TensorVisitor& fn) {
-  levels.visit(fn);
+  for (auto& level : enc.levels) fn(level, nullptr);
+  fn(enc.images, nullptr);
   alpha.visit(fn);
   color.visit(fn);
-}
-
-void TokenStage::visit(const TensorVisitor& fn) {
-  fn(frames.origins, nullptr);
-  fn(frames.rotations, nullptr);
-  fn(tokens, nullptr);
 }
 
 void TokenTableStage::visit(const TensorVisitor& fn) {
@@ -50,7 +40,7 @@ void FrameCache::visit(const TensorVisitor& fn) {
   geometry.visit(fn);
   std::visit([&](auto& stage) { stage.visit(fn); }, pixels);
   std::visit([&](auto& stage) { stage.visit(fn); }, human);
-  std::visit([&](auto& stage) { stage.visit(fn); }, network);
+  network.visit(fn);
 }
 
 double FrameCache::nbytes() const {

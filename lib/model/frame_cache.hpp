@@ -5,12 +5,12 @@
 // chunk of points reads it. Under autograd the tensors keep their history back to the encoder,
 // the transformer and the layer weights (training).
 //
-// A stage holds one of its forms (std::variant): the type says which form is in use, and the
-// form was chosen once, when the plan that made it was built (model/plan.hpp). Each form lists
-// its tensors in `visit`; a test walks the autograd graph of the per-point network and fails
-// when it reaches per-frame work through a tensor that no stage visits
-// (tests/model/test_frame_cache.cpp).
-// Parameters that a stage merely refers to are leaves already and are not visited.
+// A stage that varies holds one of its forms (std::variant): the ablation's (no pixels, no
+// human branch, the SPC baseline) or, for the pixel stage, the one its plan takes where it runs
+// (readout windows for inference on CPU, model/plan.hpp). Each form lists its tensors in `visit`; a
+// test walks the autograd graph of the per-point network and fails when it reaches per-frame work
+// through a tensor that no stage visits (tests/model/test_frame_cache.cpp). Parameters that a stage
+// merely refers to are leaves already and are not visited.
 
 #include <torch/types.h>
 
@@ -49,32 +49,22 @@ struct PaintedBody {
 struct NoPixels {
   void visit(const TensorVisitor&) {}
 };
-// Reference form: p_v materialised, (V, Cpix, H, W) (encoder.fast_sampling false).
-struct PixelMap {
-  torch::Tensor pixel;
-  void visit(const TensorVisitor& fn) { fn(pixel, nullptr); }
-};
-// Fast sampling: the ResNet levels and the images; p_v sampled exactly from them.
-struct PixelLevels {
-  EncodedViews enc;
-  void visit(const TensorVisitor& fn);
-};
-// Exact shortcuts: the linear layers that read p_v applied once per level (METHOD 9), for the
-// appearance feature (FDI's alpha_res_0) and for the colour head (folded readout).
+// The linear layers that read p_v applied once per ResNet level (METHOD 9), for the appearance
+// feature (FDI's alpha_res_0) and for the colour head (folded readout); p_v is never formed.
 struct PixelReadouts {
   PixelGeometry geometry;
   PixelReadout alpha, color;
   void visit(const TensorVisitor& fn);
 };
 // Readout windows (inference on CPU, model/shortcuts.hpp): the readouts at full resolution on a
-// rectangle of each view around the body; the levels serve the points outside them.
+// rectangle of each view around the body; the encoder's levels serve the points outside them.
 struct WindowReadouts {
-  PixelLevels levels;
+  EncodedViews enc;
   PixelWindows windows;
   WindowReadout alpha, color;
   void visit(const TensorVisitor& fn);
 };
-using PixelStage = std::variant<NoPixels, PixelMap, PixelLevels, PixelReadouts, WindowReadouts>;
+using PixelStage = std::variant<NoPixels, PixelReadouts, WindowReadouts>;
 
 // ---- human stage: read by DPaRF (METHOD 3.2, 3.3), or the SPC baseline's volume --------------
 
@@ -82,13 +72,8 @@ using PixelStage = std::variant<NoPixels, PixelMap, PixelLevels, PixelReadouts, 
 struct NoHuman {
   void visit(const TensorVisitor&) {}
 };
-// Reference form: the token frames and the tokens T_v after TransHE, (V, Nt, C).
-struct TokenStage {
-  TokenFrames frames;
-  torch::Tensor tokens;
-  void visit(const TensorVisitor& fn);
-};
-// Exact shortcut: fc_0's token part applied to the tokens, (Nt, V * 256) (METHOD 9).
+// The token frames, and fc_0's token part applied to the tokens T_v once, (Nt, V * 256)
+// (METHOD 9).
 struct TokenTableStage {
   TokenFrames frames;
   torch::Tensor table;
@@ -100,28 +85,23 @@ struct SPCStage {
   torch::Tensor grid, lo, extent;
   void visit(const TensorVisitor& fn);
 };
-using HumanStage = std::variant<NoHuman, TokenStage, TokenTableStage, SPCStage>;
+using HumanStage = std::variant<NoHuman, TokenTableStage, SPCStage>;
 
-// ---- network stage: the per-point layers' weights ---------------------------------------------
+// ---- network stage: the per-point layers' weights, folded (METHOD 9) -------------------------
 
-// Reference form: the layers use their own parameters.
-struct LayerWeights {
-  void visit(const TensorVisitor&) {}
-};
-// Folded layer weights (METHOD 9), once per frame: FDI's and the colour head's products.
+// FDI's and the colour head's products, folded once per frame.
 struct FoldedWeights {
   FDIFolded fdi;
   HeadsFolded heads;
   void visit(const TensorVisitor& fn);
 };
-using NetworkStage = std::variant<LayerWeights, FoldedWeights>;
 
 struct FrameCache {
   bool training = false;  // made by the training plan (autograd recorded), else the inference one
   FrameGeometry geometry;
   PixelStage pixels;
   HumanStage human;
-  NetworkStage network;
+  FoldedWeights network;
 
   // Every tensor of the state, visited in a fixed order, with its gradient-sink slot where the
   // tensor is a table read by weighted_gather (null otherwise). The checkpointed recomputation

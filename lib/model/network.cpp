@@ -74,14 +74,7 @@ Tensor pixel_features(const EncoderImpl& encoder, const Tensor& images) {
   const auto L1 =
       res_layer(resnet.layer1, F::max_pool2d(L0, F::MaxPool2dFuncOptions(3).stride(2).padding(1)));
   const auto L2 = res_layer(resnet.layer2, L1);
-  const auto up = F::InterpolateFuncOptions()
-                      .size(std::vector<int64_t>{images.size(2), images.size(3)})
-                      .mode(torch::kBilinear)
-                      .align_corners(true);
-  std::vector<Tensor> p{F::interpolate(L0, up), F::interpolate(L1, up), F::interpolate(L2, up)};
-  if (encoder.upsample_color)
-    p.push_back(conv2d(*encoder.upsample_color, images));  // w/o RGB: none
-  return torch::cat(p, 1);
+  return pixel_feature_map(encoder, {L0, L1, L2}, images);
 }
 
 // ---- METHOD 3.2: TransHE ------------------------------------------------------------------------
@@ -223,6 +216,34 @@ Tensor view_attention(const Tensor& q, const Tensor& k) {
 }
 
 }  // namespace
+
+Tensor pixel_feature_map(const EncoderImpl& encoder, const std::vector<Tensor>& levels,
+                         const Tensor& images) {
+  const auto up = F::InterpolateFuncOptions()
+                      .size(std::vector<int64_t>{images.size(2), images.size(3)})
+                      .mode(torch::kBilinear)
+                      .align_corners(true);
+  std::vector<Tensor> p;
+  for (const auto& level : levels) p.push_back(F::interpolate(level, up));
+  if (encoder.upsample_color)
+    p.push_back(conv2d(*encoder.upsample_color, images));  // w/o RGB: none
+  return torch::cat(p, 1);
+}
+
+Tensor grid_sample_pixels(const Tensor& map, const Tensor& uv) {
+  TORCH_CHECK(map.dim() == 4, "map must be (V, C, H, W), got ", map.sizes());
+  TORCH_CHECK(uv.dim() == 3 && uv.size(1) == map.size(0) && uv.size(2) == 2, "uv must be (N, ",
+              map.size(0), ", 2), got ", uv.sizes());
+  const auto H = map.size(2), W = map.size(3);
+  const auto scale = torch::tensor({2.0 / (W - 1), 2.0 / (H - 1)}, uv.options());
+  const auto grid = (uv * scale - 1).permute({1, 0, 2}).unsqueeze(1);  // (V, 1, N, 2)
+  const auto out = F::grid_sample(map, grid,
+                                  F::GridSampleFuncOptions()
+                                      .mode(torch::kBilinear)
+                                      .padding_mode(torch::kBorder)
+                                      .align_corners(true));
+  return out.squeeze(2).permute({2, 0, 1});  // (N, V, C)
+}
 
 Tensor NetworkOutput::raw() const { return torch::cat({rgb, sigma.unsqueeze(1)}, 1); }
 

@@ -13,6 +13,8 @@
 
 #include <torch/types.h>
 
+#include <vector>
+
 #include "model/inputs.hpp"
 #include "model/transhuman.hpp"
 
@@ -29,5 +31,15 @@ struct NetworkOutput {
 // dirs: (N, 3) their ray directions (any length) -> density and colour of every point.
 NetworkOutput network_forward(const TransHumanImpl& model, const FrameInputs& in,
                               const torch::Tensor& pts, const torch::Tensor& dirs);
+
+// The pieces of the plain pass that tests read on their own:
+// p_v at full resolution: the ResNet levels (L0, L1, L2) upsampled to the images' size and the
+// raw-RGB convolution, (V, 384, H, W) (256 channels w/o RGB).
+torch::Tensor pixel_feature_map(const EncoderImpl& encoder,
+                                const std::vector<torch::Tensor>& levels,
+                                const torch::Tensor& images);
+// grid_sample(bilinear, border, align_corners=true) of maps at pixel coordinates, with the
+// reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
+torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv);
 
 }  // namespace th::model

@@ -59,7 +59,7 @@ WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedVie
   px.color = to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias),
                        heads.readout_weight, heads.readout_bias, windows, uv, view, enc.geometry);
   px.windows = windows;
-  px.levels.enc = enc;  // for points outside the windows
+  px.enc = enc;  // for points outside the windows
   return px;
 }
 

@@ -1,8 +1,8 @@
 #pragma once
 // METHOD 9: the exact shortcuts, in one place. Each is a transformation of one stage of the
 // per-frame state (model/frame_cache.hpp), made once per frame, that leaves the rendered
-// function unchanged up to float rounding; model.exact_shortcuts: false keeps every stage in its
-// reference form (tests/model/test_shortcuts.cpp and test_formulas.cpp compare the two).
+// function unchanged up to float rounding; the plain pass of the paper's formulas
+// (model/network.hpp) is what tests/model/test_network.cpp compares them with.
 // With each transformation, the per-point code that reads the transformed stage.
 //
 // Not a stage transformation, but exact as well and also part of METHOD 9, in transhuman.cpp:
@@ -22,7 +22,8 @@ class HeadsImpl;
 // 1. Human stage. fc_0 is linear and DPaRF's Nk weights sum to 1, so fc_0's token part is
 // applied to the Nt tokens once per frame instead of to Nk tokens at every point:
 // table (Nt, V * 256) = fc_0_tokens(T_v(c)) + bias, view-major within a row. Read per point by
-// the plan (Plan::human: a weighted gather of the Nk rows, plus fc_0's coordinate part).
+// TokenFieldsImpl::forward (model/human.hpp: a weighted gather of the Nk rows, plus fc_0's
+// coordinate part).
 // tokens: (V, Nt, C).
 torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& fc_0);
 
@@ -50,8 +51,8 @@ WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedVie
 // pixel. There the readouts are stored at full resolution (each window pixel read from the
 // level table, which is then dropped), so a point reads 4 texels instead of 9 per level and 4
 // of the image: the same bilinear function, float rounding aside. Points elsewhere (full
-// rendering, mesh grids) read p_v from the levels and apply the layer (PixelReadout::weight),
-// as encoder.fast_sampling does. A view whose cubes reach behind the camera gets the whole image.
+// rendering, mesh grids) read p_v from the levels and apply the layer (WindowReadout::weight).
+// A view whose cubes reach behind the camera gets the whole image.
 PixelWindows body_windows(const FrameGeometry& geometry, const torch::Tensor& vertices,
                           double distance, const PixelGeometry& pixels);
 

@@ -40,7 +40,8 @@ HumanStage SPCTrilinearImpl::prepare(const FrameInputs& /*in*/, const PaintedBod
   return SPCStage{conv->forward(grid), lo, (dims - 1).to(lo.dtype()) * voxel};
 }
 
-torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Tensor& xs) {
+torch::Tensor SPCTrilinearImpl::forward(const HumanStage& human, const torch::Tensor& xs,
+                                        const Products& /*products*/) {
   const auto& stage = std::get<SPCStage>(human);
   const auto& grid = stage.grid;
   const auto V = grid.size(0), n = xs.size(0);

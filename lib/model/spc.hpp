@@ -14,7 +14,8 @@ class SPCTrilinearImpl : public HumanRepresentation {
   explicit SPCTrilinearImpl(const ModelConfig& config);
 
   HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
-  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                        const Products& products) override;
 
   torch::nn::Linear embed{nullptr}, fc_0{nullptr};
   torch::nn::Sequential conv{nullptr};

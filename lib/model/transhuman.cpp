@@ -44,11 +44,8 @@ const Plan& TransHumanImpl::plan(bool training, const torch::Device& device) {
   auto& plan = plans_[training ? 1 : 0];
   const bool cpu_kernels = kernels::cpu_kernels(device);
   if (!plan || plan->target().device != device || plan->target().cpu_kernels != cpu_kernels) {
-    const PlanTarget target{products_, device, training, cpu_kernels};
-    if (profile_)
-      plan = std::make_shared<const ProfiledPlan>(*this, target, profile_);
-    else
-      plan = std::make_shared<const Plan>(*this, target);
+    plan = std::make_shared<const Plan>(*this, PlanTarget{products_, device, training, cpu_kernels},
+                                        profile_);
   }
   return *plan;
 }
@@ -73,7 +70,7 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
     geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
 
   const auto enc = plan.encode(in.ref_images);  // the encoder (METHOD 3.1)
-  cache.network = plan.weights();               // the layers' weights, folded or not (9)
+  cache.network = plan.weights();               // the layers' weights, folded (9)
   if (human) {
     // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.1-3.3).
     PaintedBody body;

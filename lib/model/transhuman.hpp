@@ -30,7 +30,7 @@ class TransHumanImpl : public torch::nn::Module {
   explicit TransHumanImpl(const ModelConfig& config);
 
   // The per-frame stages (model/frame_cache.hpp), in order: frame geometry and the body-distance
-  // structure, encoder, folded weights (exact shortcuts), painting and the human
+  // structure, encoder, folded weights, painting and the human
   // representation, the pixel stage, made by the plan of the current mode: the training plan
   // while autograd records (the tensors keep their history), the inference plan otherwise.
   // `cull_distance` is the renderer's culling distance (render.cull_distance; 0: none): the
@@ -59,8 +59,8 @@ class TransHumanImpl : public torch::nn::Module {
   DirectionalRaw forward_directions(const FrameCache& cache, const torch::Tensor& pts,
                                     const torch::Tensor& directions);
 
-  // Per-stage wall times are added to `profile` when set (benchmarks): the plans are built again
-  // as profiled plans.
+  // Per-stage wall times are added to `profile` when set (benchmarks); null: none. The plans are
+  // built again.
   void set_profile(render::Profile* profile);
   // The precision of the products (model/precision.hpp); fp32 through BLAS until set. The
   // parameters and the per-frame state stay fp32 either way. The plans are built again.

@@ -299,8 +299,7 @@ constexpr const char* kConfigKey = "model_config";
 // in the checkpoint).
 bool compared(const std::string& key) {
   return key != "model.encoder.pretrained" && key != "model.grouping.cache_dir" &&
-         key != "model.grouping.kmeans_file" && key != "model.exact_shortcuts" &&
-         key != "model.readout_windows";
+         key != "model.grouping.kmeans_file";
 }
 
 }  // namespace

@@ -1,3 +1,6 @@
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <catch2/catch.hpp>
 #include <cmath>
@@ -170,6 +173,45 @@ TEST_CASE("a misspelt key fails naming the key and the likely intended one", "[c
       message_of([&] { load<Config>("configs/default.yaml", {"model.dparf.nkk=3"}); });
   CHECK_THAT(msg2, Catch::Contains("unknown config key 'model.dparf.nkk'"));
   CHECK_THAT(msg2, Catch::Contains("did you mean 'model.dparf.nk'"));
+}
+
+TEST_CASE("a retired key is ignored with one warning naming it, and is no key any more",
+          "[config]") {
+  // model.exact_shortcuts, model.readout_windows and model.encoder.fast_sampling chose how the
+  // network was evaluated, never what it computes: configs and runs written with them still load.
+  const fs::path dir = th::test::scratch_dir("config_retired");
+  write_file(dir, "old.yaml",
+             "parent: " + fs::absolute("configs/default.yaml").string() +
+                 "\nmodel:\n  exact_shortcuts: false\n  readout_windows: true\n"
+                 "  encoder:\n    fast_sampling: false\n");
+  std::ostringstream captured;
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(captured);
+  spdlog::default_logger()->sinks().push_back(sink);
+  Config c;
+  const std::string error = message_of([&] { c = load<Config>(dir / "old.yaml"); });
+  spdlog::default_logger()->sinks().pop_back();
+  CHECK(error == "<no error>");
+  const std::string log = captured.str();
+  for (const char* key :
+       {"'model.exact_shortcuts'", "'model.readout_windows'", "'model.encoder.fast_sampling'"}) {
+    INFO(key);
+    size_t count = 0;
+    for (size_t at = log.find(key); at != std::string::npos; at = log.find(key, at + 1)) ++count;
+    CHECK(count == 1);
+  }
+  CHECK_THAT(log, Catch::Contains("no longer read and is ignored"));
+  // Not written back, not listed, and a config without them says nothing.
+  const auto tree = to_tree(c);
+  CHECK_FALSE(tree["model"]["exact_shortcuts"].IsDefined());
+  CHECK_FALSE(tree["model"]["encoder"]["fast_sampling"].IsDefined());
+  for (const auto& info : keys<Config>())
+    CHECK(info.key.find("exact_shortcuts") == std::string::npos);
+  std::ostringstream quiet;
+  auto quiet_sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(quiet);
+  spdlog::default_logger()->sinks().push_back(quiet_sink);
+  load<Config>("configs/default.yaml");
+  spdlog::default_logger()->sinks().pop_back();
+  CHECK(quiet.str().find("no longer read") == std::string::npos);
 }
 
 TEST_CASE("an override of an unknown key or section fails naming it", "[config]") {

@@ -121,10 +121,6 @@ TEST_CASE("every ablation builds, trains one step and renders one image", "[mode
        [](ModelConfig& c, RenderConfig&) {
          c.transhe.pe_rounding = PeRounding::fused, c.encoder.batchnorm = BatchNormStats::running;
        }},
-      {"direct computation (no shortcuts)",
-       [](ModelConfig& c, RenderConfig&) {
-         c.exact_shortcuts = false, c.encoder.fast_sampling = false;
-       }},
   };
   for (int nk = 1; nk <= 9; ++nk)
     ablations.push_back(

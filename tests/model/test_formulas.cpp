@@ -8,7 +8,9 @@
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/nearest_fields.hpp"
 #include "model/kernels/view_attention.hpp"
+#include "model/network.hpp"
 #include "model/positional_encoding.hpp"
 #include "model/shortcuts.hpp"
 #include "model/transhe.hpp"
@@ -69,9 +71,15 @@ TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v",
   const auto q = dparf.query(frames, xs);
   CHECK(torch::equal(q.index, ref.at("index")));
   CHECK(max_abs(q.weight, ref.at("weights")) < 1e-6);
-  CHECK(max_abs(DPaRF::local_coordinates(frames, xs, q.index), ref.at("local")) < 1e-5);
+  const auto fields = kernels::nearest_fields(xs, frames.origins, frames.rotations,
+                                              {7, 0.5, /*local=*/true, cfg.pe_freqs, true});
+  CHECK(max_abs(fields.local, ref.at("local")) < 1e-5);
+  // h_v = sum_k w_k [T_v(k); g_k]: the tokens weighted here, sum_k w_k g_k from the query.
   // 1-ulp differences of l (float32) are amplified by f_9 = 512 pi in the encoding.
-  CHECK(max_abs(dparf.features(frames, tokens, xs), ref.at("h")) < 1e-4);
+  const auto T_k = tokens.index_select(1, q.index.flatten()).view({V, n, cfg.nk, C});
+  const auto h_tokens = (q.weight.view({1, n, cfg.nk, 1}) * T_k).sum(2).permute({1, 0, 2});
+  const auto h = torch::cat({h_tokens, q.coords.unsqueeze(1).expand({n, V, -1})}, 2);
+  CHECK(max_abs(h, ref.at("h")) < 1e-4);
 }
 
 TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim=1)",
@@ -100,10 +108,8 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   CHECK(max_abs(att, ref.at("attention")) < 1e-6);
   CHECK(torch::allclose(att.sum(2), torch::ones({n, V})));  // normalised over the key views
   const Plan plan(*model, PlanTarget{});
-  FrameCache layers, folded;
-  layers.network = LayerWeights{};
+  FrameCache folded;
   folded.network = fold_weights(*model->fdi, *model->heads);
-  CHECK(max_abs(plan.fuse(layers, s, a), ref.at("e")) < 1e-4);
   CHECK(max_abs(plan.fuse(folded, s, a), ref.at("e")) < 1e-4);
 }
 
@@ -159,7 +165,7 @@ TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvisi
   CHECK(max_abs(out.levels[0], ref.at("l0")) < 1e-4);
   CHECK(max_abs(out.levels[1], ref.at("l1")) < 1e-4);
   CHECK(max_abs(out.levels[2], ref.at("l2")) < 1e-4);
-  const auto pixel = enc->pixel_features(out);
+  const auto pixel = pixel_feature_map(*enc, out.levels, images);
   CHECK(max_abs(pixel, ref.at("pixel")) < 1e-4);
   CHECK(max_abs(torch::conv2d(pixel, enc->reduction_layer->weight, enc->reduction_layer->bias),
                 ref.at("holder")) < 1e-4);

@@ -64,17 +64,13 @@ TEST_CASE("every per-frame tensor that the per-point network reads is visited, i
           "[model][frame_cache]") {
   const auto frame = test::synthetic_frame();
   const std::vector<Variant> variants{
-      {"exact shortcuts (default)", [](ModelConfig&) {}},
-      {"reference, p_v materialised",
-       [](ModelConfig& c) { c.exact_shortcuts = false, c.encoder.fast_sampling = false; }},
-      {"reference, fast sampling", [](ModelConfig& c) { c.exact_shortcuts = false; }},
+      {"default", [](ModelConfig&) {}},
       {"w/o a", [](ModelConfig& c) { c.fdi.appearance = false; }},
       {"w/o h", [](ModelConfig& c) { c.fdi.human = false; }},
       {"w/o RGB", [](ModelConfig& c) { c.fdi.raw_rgb = false; }},
       {"w/o TransHE", [](ModelConfig& c) { c.transhe.enabled = false; }},
       {"absolute coordinates", [](ModelConfig& c) { c.dparf.coordinate = Coordinate::absolute; }},
-      {"no coordinates, reference",
-       [](ModelConfig& c) { c.dparf.coordinate = Coordinate::none, c.exact_shortcuts = false; }},
+      {"no coordinates", [](ModelConfig& c) { c.dparf.coordinate = Coordinate::none; }},
       {"SPC baseline",
        [](ModelConfig& c) {
          c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1,

@@ -1,5 +1,5 @@
 // The plan (model/plan.hpp): built once per mode, device and precision, picked when a frame is
-// prepared, kept by the frame's chunks; profiling wraps it from outside; the guard that puts the
+// prepared, kept by the frame's chunks; its stages' timing hook; the guard that puts the
 // kernels' LibTorch forms in place of the CPU kernels.
 #include <torch/torch.h>
 
@@ -59,8 +59,7 @@ TEST_CASE("a plan per mode: prepare picks it once and the frame's chunks keep it
   CHECK(model->plan(true, torch::kCPU).target().products.bf16());
 }
 
-TEST_CASE("profiling wraps the plan: each stage's time, the method's results unchanged",
-          "[model][plan]") {
+TEST_CASE("profiling: each stage's time, the method's results unchanged", "[model][plan]") {
   const auto frame = test::synthetic_frame();
   torch::manual_seed(7);
   TransHuman model(test::tiny_model_config());
@@ -83,7 +82,7 @@ TEST_CASE("profiling wraps the plan: each stage's time, the method's results unc
   }
   CHECK(profile.open.empty());  // every timer closed
 
-  // Without a profile, the plans are plain again: nothing more is recorded.
+  // Without a profile, nothing more is recorded.
   const auto before = profile.seconds;
   model->forward(cache, pts, dirs);
   CHECK(profile.seconds == before);

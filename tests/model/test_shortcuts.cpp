@@ -1,4 +1,5 @@
-// The exact shortcuts of METHOD 9 against the direct computation they replace.
+// The exact shortcuts of METHOD 9 and the kernels that read them, against the direct computation
+// they replace (the plain pass's pieces, model/network.hpp) and against their LibTorch forms.
 #include <torch/torch.h>
 
 #include <array>
@@ -6,7 +7,9 @@
 
 #include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/forms.hpp"
 #include "model/kernels/view_attention.hpp"
+#include "model/network.hpp"
 #include "model/sampling.hpp"
 #include "model/shortcuts.hpp"
 #include "model/transhuman.hpp"
@@ -26,17 +29,6 @@ torch::Tensor random_uv(int64_t n, int64_t V, int64_t W, int64_t H) {
   uv.index_put_({0}, torch::tensor({0.0, 0.0}));
   uv.index_put_({1}, torch::tensor({static_cast<double>(W - 1), static_cast<double>(H - 1)}));
   return uv;
-}
-
-// Copies a's weights into b and puts both in inference mode.
-void same_weights_for_inference(TransHuman& a, TransHuman& b) {
-  {
-    torch::NoGradGuard ng;
-    auto src = a->named_parameters();
-    for (auto& p : b->named_parameters()) p.value().copy_(src[p.key()]);
-  }
-  a->eval();
-  b->eval();
 }
 
 }  // namespace
@@ -99,7 +91,7 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
     const int64_t V = 3, S = 32, n = 100;
     const auto images = torch::rand({V, 3, S, S});
     const auto views = enc->forward(images);
-    const auto pf = enc->pixel_features(views);
+    const auto pf = pixel_feature_map(*enc, views.levels, views.images);
     REQUIRE(pf.size(1) == enc->pixel_channels());
     torch::nn::Linear layer(enc->pixel_channels(), 40);
     const auto uv = random_uv(n, V, S, S);
@@ -118,40 +110,10 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
     CHECK(max_abs(p.view({n, V, -1}), grid_sample_pixels(pf, uv)) < 2e-5);
     const auto vis = torch::rand({V, n}) < 0.7;
     const auto uvv = uv.permute({1, 0, 2});
-    CHECK(max_abs(enc->paint(views, uvv, vis), enc->paint_direct(views, uvv, vis)) < 2e-5);
-  }
-}
-
-TEST_CASE("the model with METHOD 9 shortcuts equals the direct computation", "[model][shortcuts]") {
-  const auto frame = test::synthetic_frame();
-  auto cfg = test::tiny_model_config();
-  for (auto variant : {"default", "no_coordinate", "absolute", "wo_a", "wo_h", "wo_rgb", "spc"}) {
-    DYNAMIC_SECTION(variant) {
-      auto c = cfg;
-      const std::string v = variant;
-      if (v == "no_coordinate") c.dparf.coordinate = Coordinate::none;
-      if (v == "absolute") c.dparf.coordinate = Coordinate::absolute;
-      if (v == "wo_a") c.fdi.appearance = false;
-      if (v == "wo_h") c.fdi.human = false;
-      if (v == "wo_rgb") c.fdi.raw_rgb = false;
-      if (v == "spc")
-        c.representation = Representation::spc_trilinear, c.spc.voxel_size = 0.1,
-        c.spc.channels = 8;
-      torch::manual_seed(4);
-      TransHuman fast(c);
-      auto cd = c;
-      cd.exact_shortcuts = false;
-      cd.encoder.fast_sampling = false;
-      TransHuman direct(cd);
-      same_weights_for_inference(fast, direct);
-      torch::NoGradGuard ng;
-      const auto pts = frame.inputs.vertices.narrow(0, 0, 64) + 0.05 * torch::randn({64, 3});
-      const auto dirs = torch::randn({64, 3});
-      const auto a = fast->forward(fast->prepare(frame.inputs, 0.1), pts, dirs);
-      const auto b = direct->forward(direct->prepare(frame.inputs, 0.1), pts, dirs);
-      INFO("max |raw| " << b.abs().max().item<double>());
-      CHECK(max_abs(a, b) < 1e-4 * (1 + b.abs().max().item<double>()));
-    }
+    const auto holder = torch::conv2d(pf, enc->reduction_layer->weight, enc->reduction_layer->bias);
+    const auto painted =
+        grid_sample_pixels(holder, uv).permute({1, 0, 2}) * vis.unsqueeze(-1).to(torch::kFloat);
+    CHECK(max_abs(enc->paint(views, uvv, vis), painted) < 2e-5);
   }
 }
 
@@ -176,7 +138,7 @@ TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradie
   CHECK(max_abs(ga[1], gb[1]) < 1e-12);
 }
 
-TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][shortcuts]") {
+TEST_CASE("the one-pass DPaRF query equals its LibTorch form", "[model][shortcuts]") {
   torch::manual_seed(8);
   const int64_t nt = 60, n = 500;
   TokenFrames frames{torch::randn({nt, 3}) * 0.3,
@@ -189,7 +151,11 @@ TEST_CASE("the one-pass DPaRF query equals the tensor formulation", "[model][sho
       cfg.coordinate = coordinate;
       cfg.nk = nk;
       DPaRF dparf(cfg);
-      const auto a = dparf.query(frames, xs), b = dparf.query_tensors(frames, xs);
+      const auto a = dparf.query(frames, xs);
+      const auto b = [&] {
+        kernels::LibTorchForms libtorch_forms;
+        return dparf.query(frames, xs);
+      }();
       INFO(config::name_of(coordinate) << " nk " << nk);
       CHECK(torch::equal(a.index, b.index));
       CHECK(max_abs(a.weight, b.weight) < 1e-6);
@@ -291,17 +257,13 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   const auto frame = test::synthetic_frame(300, 24, 3, 48);
   auto c = test::tiny_model_config();
   torch::manual_seed(13);
-  TransHuman windows(c);
-  auto ct = c;
-  ct.readout_windows = false;
-  TransHuman tables(ct);
-  same_weights_for_inference(windows, tables);
+  TransHuman model(c);
+  model->eval();
   torch::NoGradGuard ng;
-  const auto a = windows->prepare(frame.inputs, 0.1), b = tables->prepare(frame.inputs, 0.1);
+  // With a culling distance the inference plan makes windows; without one, the level tables.
+  const auto a = model->prepare(frame.inputs, 0.1), b = model->prepare(frame.inputs, 0);
   REQUIRE(std::holds_alternative<WindowReadouts>(a.pixels));
-  CHECK(std::holds_alternative<PixelReadouts>(b.pixels));
-  // Without a culling distance there are no windows.
-  CHECK(std::holds_alternative<PixelReadouts>(windows->prepare(frame.inputs, 0).pixels));
+  REQUIRE(std::holds_alternative<PixelReadouts>(b.pixels));
   torch::manual_seed(14);
   const int64_t n = 500;
   // Near the body (inside the windows) and far from it (read from the levels).
@@ -319,10 +281,10 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   CHECK((~std::get<WindowReadouts>(a.pixels).windows.taps(uv, view, 48, 48).second)
             .sum()
             .item<int64_t>() > 100);
-  const auto ya = windows->forward(a, pts, dirs), yb = tables->forward(b, pts, dirs);
+  const auto ya = model->forward(a, pts, dirs), yb = model->forward(b, pts, dirs);
   INFO("max |raw| " << yb.abs().max().item<double>());
   CHECK(max_abs(ya, yb) < 1e-5 * (1 + yb.abs().max().item<double>()));
   // Under autograd (training) the level tables stay.
   torch::AutoGradMode grad(true);
-  CHECK(std::holds_alternative<PixelReadouts>(windows->prepare(frame.inputs, 0.1).pixels));
+  CHECK(std::holds_alternative<PixelReadouts>(model->prepare(frame.inputs, 0.1).pixels));
 }

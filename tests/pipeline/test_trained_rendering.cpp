@@ -12,6 +12,7 @@
 #include "core/config_io.hpp"
 #include "data/dataset.hpp"
 #include "eval/evaluator.hpp"
+#include "model/kernels/forms.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/checkpoint.hpp"
 #include "pipeline/pipeline.hpp"
@@ -100,22 +101,24 @@ TEST_CASE(
 TEST_CASE("on a trained network, readout windows render every ray as the per-level tables do",
           "[inference][windows]") {
   torch::set_num_threads(1);
-  Frames windows(surface_config({"data.ratio=0.5"})),
-      tables(surface_config({"data.ratio=0.5", "model.readout_windows=false"}));
-  REQUIRE(windows.config.model.readout_windows);  // on by default
+  Frames f(surface_config({"data.ratio=0.5"}));
   for (int samples : {64, 16}) {
-    auto rc = windows.config.render;
+    auto rc = f.config.render;
     rc.samples = samples;
-    for (size_t i = 0; i < std::min<size_t>(windows.dataset->size(), 4); ++i) {
-      const auto s = windows.dataset->load(i, 0);
+    for (size_t i = 0; i < std::min<size_t>(f.dataset->size(), 4); ++i) {
+      const auto s = f.dataset->load(i, 0);
       torch::NoGradGuard no_grad;
-      const auto a = th::pipeline::prepare_frame(*windows.model, windows.inputs(s), rc),
-                 b = th::pipeline::prepare_frame(*tables.model, tables.inputs(s), rc);
+      const auto a = th::pipeline::prepare_frame(*f.model, f.inputs(s), rc);
+      // The level tables: the pixel stage a frame prepared in the LibTorch forms takes.
+      const auto b = [&] {
+        th::model::kernels::LibTorchForms libtorch_forms;
+        return th::pipeline::prepare_frame(*f.model, f.inputs(s), rc);
+      }();
       REQUIRE(std::holds_alternative<th::model::WindowReadouts>(a.pixels));
       REQUIRE(std::holds_alternative<th::model::PixelReadouts>(b.pixels));
       const auto rays = th::pipeline::sample_rays(s, torch::kCPU);
-      const auto fast = th::pipeline::render(*windows.model, a, rays, rc, th::pipeline::kInference);
-      const auto exact = th::pipeline::render(*tables.model, b, rays, rc, th::pipeline::kInference);
+      const auto fast = th::pipeline::render(*f.model, a, rays, rc, th::pipeline::kInference);
+      const auto exact = th::pipeline::render(*f.model, b, rays, rc, th::pipeline::kInference);
       CAPTURE(samples, s.human, s.frame, s.target_view);
       CHECK((fast.rgb - exact.rgb).abs().max().item<double>() <= 1e-3);
       CHECK((fast.acc - exact.acc).abs().max().item<double>() <= 1e-3);
@@ -178,8 +181,7 @@ TEST_CASE(
   const std::vector<std::string> limit{"eval.limit=6", "render.samples=64", "threads=1"};
   auto exact_overrides = limit;
   exact_overrides.insert(exact_overrides.end(),
-                         {"render.termination_transmittance=0", "eval.reuse_frames=false",
-                          "model.readout_windows=false"});
+                         {"render.termination_transmittance=0", "eval.reuse_frames=false"});
   th::eval::evaluate(surface_config(limit), torch::kCPU, trained_checkpoint(), dir / "fast");
   th::eval::evaluate(surface_config(exact_overrides), torch::kCPU, trained_checkpoint(),
                      dir / "exact");
