@@ -307,9 +307,12 @@ int run(int argc, char** argv) {
   const int nthreads = runtime::set_threads(threads);
   const int64_t size = quick ? 128 : 512;
 
-  auto products_of = [](const std::string& path) {
-    if (path == "fp32-blas") return model::resolve_products("fp32", "blas", torch::kCPU);
-    return model::resolve_products(path, "auto", torch::kCPU);
+  // A precision path: fp32, bf16, auto, or fp32-blas (fp32 with its products through BLAS).
+  auto products_of = [](const std::string& path, std::string* why = nullptr) {
+    if (path == "fp32-blas")
+      return model::resolve_products(PrecisionChoice::fp32, Fp32Products::blas, torch::kCPU, why);
+    return model::resolve_products(config::parse_choice<PrecisionChoice>("--precision", path),
+                                   Fp32Products::automatic, torch::kCPU, why);
   };
   Report r;
   r.line("# TransHuman model benchmark");
@@ -328,8 +331,7 @@ int run(int argc, char** argv) {
     std::string why;
     std::string paths;
     for (const auto& p : precisions) {
-      model::resolve_products(p == "fp32-blas" ? "fp32" : p, p == "fp32-blas" ? "blas" : "auto",
-                              torch::kCPU, &why);
+      products_of(p, &why);
       paths += (paths.empty() ? "" : "; ") + p + ": " + why;
     }
     r.line("Processor: " + bench::cpu_model() + ", bf16: " + runtime::detect_cpu_bf16().describe() +

@@ -28,6 +28,8 @@ enum class Representation { transhuman, spc_trilinear };
 enum class Recompute { automatic, always, never };
 enum class MismatchPolicy { error, warn };
 enum class ViewRenderer { exact, baked };
+enum class PrecisionChoice { fp32, bf16, automatic };
+enum class Fp32Products { automatic, onednn, blas };
 
 #define TH_CHOICE_NAMES(E, ...)                             \
   inline const config::ChoiceNames<E>& choice_names(E) {    \
@@ -63,6 +65,10 @@ TH_CHOICE_NAMES(MismatchPolicy, {"error", MismatchPolicy::error}, {"warn", Misma
 TH_CHOICE_NAMES(Recompute, {"auto", Recompute::automatic}, {"always", Recompute::always},
                 {"never", Recompute::never})
 TH_CHOICE_NAMES(ViewRenderer, {"exact", ViewRenderer::exact}, {"baked", ViewRenderer::baked})
+TH_CHOICE_NAMES(PrecisionChoice, {"fp32", PrecisionChoice::fp32}, {"bf16", PrecisionChoice::bf16},
+                {"auto", PrecisionChoice::automatic})
+TH_CHOICE_NAMES(Fp32Products, {"auto", Fp32Products::automatic}, {"onednn", Fp32Products::onednn},
+                {"blas", Fp32Products::blas})
 #undef TH_CHOICE_NAMES
 
 // ---- the sections: each field's type and default; its key, accepted values and description
@@ -213,8 +219,8 @@ struct EvalConfig {
 struct Config {
   int64_t seed = 42;
   std::string device = "auto";
-  std::string precision = "fp32";
-  std::string fp32_products = "auto";
+  PrecisionChoice precision = PrecisionChoice::fp32;
+  Fp32Products fp32_products = Fp32Products::automatic;
   int threads = 0;
   double max_memory_gb = 0;
   DataConfig data;
@@ -432,10 +438,10 @@ template <class V>
 void visit_fields(V& v, Config& c) {
   v("seed", c.seed, "random seed");
   v.choice("device", c.device, {"auto", "cpu", "cuda"}, "where the network runs");
-  v.choice("precision", c.precision, {"fp32", "bf16", "auto"},
+  v.choice("precision", c.precision,
            "the network's matrix products: fp32 (the paper's numbers), bf16, or auto (bf16 "
            "where the processor has native bf16 dot products; model/precision.hpp)");
-  v.choice("fp32_products", c.fp32_products, {"auto", "onednn", "blas"},
+  v.choice("fp32_products", c.fp32_products,
            "fp32 products on CPU: auto (oneDNN when LibTorch has it), onednn or blas");
   v("threads", c.threads, config::in(0, 4096), "CPU threads for LibTorch; 0: one per core");
   v("max_memory_gb", c.max_memory_gb, config::at_least(0),

@@ -102,6 +102,18 @@ const char* name_of(E value) {
   return "?";
 }
 
+// The enum value of a choice's YAML name; a th::Error naming `what`, `text` and the known names
+// otherwise (command-line options that take a choice's names).
+template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
+E parse_choice(const std::string& what, const std::string& text) {
+  std::string list;
+  for (const auto& [name, v] : choice_names(E{})) {
+    if (text == name) return v;
+    list += std::string(list.empty() ? "" : ", ") + name;
+  }
+  fail(what, ": '", text, "' is not one of {", list, "}");
+}
+
 namespace detail {
 
 std::string join_path(const std::string& prefix, const std::string& key);

@@ -60,47 +60,25 @@ std::string Products::describe() const {
   return onednn ? "fp32 (oneDNN products)" : "fp32 (BLAS products)";
 }
 
-namespace {
-
-enum class Asked { fp32, bf16, automatic };
-enum class Backend { automatic, onednn, blas };
-
-template <class E>
-E parse(const std::string& what, const std::string& text,
-        std::initializer_list<std::pair<const char*, E>> names, const char* expected) {
-  for (const auto& [name, value] : names)
-    if (text == name) return value;
-  fail(what, " '", text, "': expected ", expected);
-}
-
-}  // namespace
-
-Products resolve_products(const std::string& precision_text, const std::string& fp32_products_text,
+Products resolve_products(PrecisionChoice precision, Fp32Products backend,
                           const torch::Device& device, std::string* why, std::string* warning) {
-  const auto precision =
-      parse<Asked>("precision", precision_text,
-                   {{"fp32", Asked::fp32}, {"bf16", Asked::bf16}, {"auto", Asked::automatic}},
-                   "fp32, bf16 or auto");
-  const auto backend = parse<Backend>(
-      "fp32_products", fp32_products_text,
-      {{"auto", Backend::automatic}, {"onednn", Backend::onednn}, {"blas", Backend::blas}},
-      "auto, onednn or blas");
   const bool cpu = device.is_cpu();
-  if (backend == Backend::onednn && cpu && !at::hasMKLDNN())
+  if (backend == Fp32Products::onednn && cpu && !at::hasMKLDNN())
     fail("fp32_products 'onednn': the linked LibTorch is built without oneDNN (use auto or blas)");
-  if (backend == Backend::onednn && cpu && !onednn_products_agree())
+  if (backend == Fp32Products::onednn && cpu && !onednn_products_agree())
     fail(
         "fp32_products 'onednn': this LibTorch's oneDNN product (mkldnn_linear) disagrees with "
         "BLAS on a ",
         "probe product (use auto or blas)");
   Products p;
-  p.onednn = cpu && backend != Backend::blas && at::hasMKLDNN() && onednn_products_agree();
-  const bool onednn_refused = cpu && backend == Backend::automatic && at::hasMKLDNN() && !p.onednn;
+  p.onednn = cpu && backend != Fp32Products::blas && at::hasMKLDNN() && onednn_products_agree();
+  const bool onednn_refused =
+      cpu && backend == Fp32Products::automatic && at::hasMKLDNN() && !p.onednn;
   const auto bf16 = runtime::detect_cpu_bf16();
   std::string reason;
-  if (precision == Asked::fp32) {
+  if (precision == PrecisionChoice::fp32) {
     reason = "precision: fp32";
-  } else if (precision == Asked::bf16) {
+  } else if (precision == PrecisionChoice::bf16) {
     p.precision = Precision::bf16;
     reason = "precision: bf16";
     if (cpu && !bf16.native() && warning)
@@ -125,7 +103,7 @@ Products resolve_products(const std::string& precision_text, const std::string& 
   return p;
 }
 
-Products select_products(const std::string& precision, const std::string& fp32_products,
+Products select_products(PrecisionChoice precision, Fp32Products fp32_products,
                          const torch::Device& device) {
   std::string why, warning;
   const auto p = resolve_products(precision, fp32_products, device, &why, &warning);

@@ -28,6 +28,8 @@
 
 #include <string>
 
+#include "core/config.hpp"
+
 namespace th::model {
 
 enum class Precision { fp32, bf16 };
@@ -63,16 +65,16 @@ bool onednn_products_agree();
 
 // The products for the config's `precision` (fp32 | bf16 | auto) and `fp32_products`
 // (auto | onednn | blas) on `device`. auto takes bf16 where the processor executes bf16 dot
-// products natively (AVX512-BF16 or AMX, runtime::detect_cpu_bf16) or on a CUDA device with
-// bf16 support, fp32 elsewhere. `why` (optional) receives one line saying which and why; an
-// explicit bf16 on a processor without those instructions runs emulated and `warning` says so.
-// A bad value is a th::Error naming it.
-Products resolve_products(const std::string& precision, const std::string& fp32_products,
+// products natively (AVX512-BF16 or AMX, runtime::detect_cpu_bf16), fp32 elsewhere (on CUDA
+// too: bf16 there is asked for by name). `why` (optional) receives one line saying which and why;
+// an explicit bf16 on a processor without those instructions runs emulated and `warning` says so.
+// `onednn` where this LibTorch lacks oneDNN, or its product disagrees, is a th::Error naming it.
+Products resolve_products(PrecisionChoice precision, Fp32Products fp32_products,
                           const torch::Device& device, std::string* why = nullptr,
                           std::string* warning = nullptr);
 
 // resolve_products for the config's keys, with its line logged (and its warning, if any).
-Products select_products(const std::string& precision, const std::string& fp32_products,
+Products select_products(PrecisionChoice precision, Fp32Products fp32_products,
                          const torch::Device& device);
 
 // Autocast to bf16 on `device` while alive, when `products` asks for bf16 (the per-frame

@@ -5,6 +5,7 @@
 // FrameField the renderer trains through). The model runs with its CPU kernels, and again with
 // their LibTorch forms, the arithmetic it runs on a GPU (model/kernels/forms.hpp).
 #include <torch/torch.h>
+#include <yaml-cpp/yaml.h>
 
 #include <algorithm>
 #include <catch2/catch.hpp>
@@ -214,4 +215,64 @@ TEST_CASE("the plain network pass equals the model in its LibTorch forms, in eve
       CHECK(c.grad <= 1e-5);
     }
   }
+}
+
+// Each ablation changes what the network computes: the row's model, given the full model's
+// weights wherever a parameter has the same name and shape, and the full model evaluate the same
+// points, each on the frame of its own setting (the rows of token groups and Nt change the
+// frame's labels, the others the network); their outputs differ. A row whose switch changed nothing
+// would give the same outputs bit for bit (checked on the full model against a copy of itself).
+// Rows that change no model key (samples, losses, training) are left to their own tests.
+TEST_CASE("every ablation changes the network's function", "[model][network][ablations]") {
+  const auto all = rows();
+  const auto full_it =
+      std::find_if(all.begin(), all.end(), [](const Row& r) { return r.name == "full"; });
+  REQUIRE(full_it != all.end());
+  const auto model_keys = [](const ModelConfig& c) { return YAML::Dump(config::to_tree(c)); };
+  for (const auto& row : all) {
+    if (row.name == "default" || row.name == "full") continue;
+    if (model_keys(row.model) == model_keys(full_it->model)) continue;  // not a model ablation
+    DYNAMIC_SECTION(row.name) {
+      auto s = setup(row.model);  // the row's model, frame and points
+      auto full_cfg = full_it->model;
+      const auto full_frame = frame_for(full_cfg);
+      torch::manual_seed(3);
+      TransHuman full(full_cfg);
+      int64_t shared = 0;
+      {
+        torch::NoGradGuard no_grad;
+        auto source = full->named_parameters();
+        for (auto& p : s.model->named_parameters()) {
+          const auto* q = source.find(p.key());
+          if (q && q->sizes() == p.value().sizes()) p.value().copy_(*q), ++shared;
+        }
+      }
+      CHECK(shared > 0);
+      full->eval();
+      s.model->eval();
+      torch::NoGradGuard no_grad;
+      auto raw_of = [&](TransHumanImpl& m, const test::SyntheticFrame& f) {
+        return m.forward(m.prepare(f.inputs, 0.1), s.pts, s.dirs);
+      };
+      const auto a = raw_of(*full, full_frame), b = raw_of(*s.model, s.frame);
+      const double diff = max_abs(a, b);
+      std::printf("ablation %-26s %3lld shared parameters  max|raw - full's| %.3e\n",
+                  row.name.c_str(), static_cast<long long>(shared), diff);
+      CHECK(diff > 1e-6 * (1 + a.abs().max().item<double>()));
+    }
+  }
+  // The check can fail: the full model against a copy of its own weights gives zero.
+  auto s = setup(full_it->model);
+  torch::manual_seed(3);
+  TransHuman copy(s.model->config());
+  {
+    torch::NoGradGuard no_grad;
+    auto source = s.model->named_parameters();
+    for (auto& p : copy->named_parameters()) p.value().copy_(source[p.key()]);
+  }
+  s.model->eval();
+  copy->eval();
+  torch::NoGradGuard no_grad;
+  CHECK(max_abs(s.model->forward(s.model->prepare(s.frame.inputs, 0.1), s.pts, s.dirs),
+                copy->forward(copy->prepare(s.frame.inputs, 0.1), s.pts, s.dirs)) == 0);
 }

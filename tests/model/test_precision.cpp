@@ -59,16 +59,22 @@ TEST_CASE("the bf16 instructions found by CPUID are the ones the kernel reports"
 TEST_CASE("precision auto takes bf16 exactly where the processor has native bf16 dot products",
           "[precision]") {
   std::string why, warning;
-  const auto p = resolve_products("auto", "auto", torch::kCPU, &why, &warning);
+  const auto p = resolve_products(th::PrecisionChoice::automatic, th::Fp32Products::automatic,
+                                  torch::kCPU, &why, &warning);
   const bool native = th::runtime::detect_cpu_bf16().native();
   CHECK(p.bf16() == native);
   CHECK(why.find(native ? "auto -> bf16" : "auto -> fp32") != std::string::npos);
   CHECK(warning.empty());
-  CHECK(!resolve_products("fp32", "auto", torch::kCPU).bf16());
-  CHECK(resolve_products("bf16", "auto", torch::kCPU, &why, &warning).bf16());
+  CHECK(!resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::automatic, torch::kCPU)
+             .bf16());
+  CHECK(resolve_products(th::PrecisionChoice::bf16, th::Fp32Products::automatic, torch::kCPU, &why,
+                         &warning)
+            .bf16());
   CHECK(warning.empty() == native);  // explicit bf16 without native products warns
-  CHECK(resolve_products("fp32", "blas", torch::kCPU).onednn == false);
-  CHECK(resolve_products("fp32", "auto", torch::kCPU).onednn == th::model::onednn_products_agree());
+  CHECK(resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::blas, torch::kCPU).onednn ==
+        false);
+  CHECK(resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::automatic, torch::kCPU)
+            .onednn == th::model::onednn_products_agree());
 }
 
 TEST_CASE("bad precision values are refused by name", "[precision]") {
@@ -80,10 +86,6 @@ TEST_CASE("bad precision values are refused by name", "[precision]") {
     }
     return std::string("(no error)");
   };
-  CHECK(message([] { resolve_products("fp16", "auto", torch::kCPU); }) ==
-        "precision 'fp16': expected fp32, bf16 or auto");
-  CHECK(message([] { resolve_products("fp32", "mkl", torch::kCPU); }) ==
-        "fp32_products 'mkl': expected auto, onednn or blas");
   const auto m =
       message([] { th::config::load<th::Config>("configs/default.yaml", {"precision=half"}); });
   CHECK(m.find("'precision'") != std::string::npos);
@@ -102,15 +104,20 @@ TEST_CASE("products match a float64 reference: fp32 to 1e-6, bf16 to 2e-2, gradi
   const auto ref = torch::nn::functional::linear(x.to(torch::kDouble), w.to(torch::kDouble),
                                                  b.to(torch::kDouble));
   std::vector<std::pair<const char*, Products>> paths{
-      {"blas", resolve_products("fp32", "blas", torch::kCPU)},
-      {"bf16", resolve_products("bf16", "auto", torch::kCPU)}};
+      {"blas", resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::blas, torch::kCPU)},
+      {"bf16",
+       resolve_products(th::PrecisionChoice::bf16, th::Fp32Products::automatic, torch::kCPU)}};
   // Where oneDNN's product is wrong (Debian 13's LibTorch 2.6), it is refused, and auto takes BLAS.
   if (th::model::onednn_products_agree()) {
-    paths.emplace_back("onednn", resolve_products("fp32", "onednn", torch::kCPU));
+    paths.emplace_back("onednn", resolve_products(th::PrecisionChoice::fp32,
+                                                  th::Fp32Products::onednn, torch::kCPU));
   } else {
-    CHECK_THROWS_WITH(resolve_products("fp32", "onednn", torch::kCPU),
-                      Catch::Contains("disagrees with BLAS on a probe product"));
-    CHECK_FALSE(resolve_products("fp32", "auto", torch::kCPU).onednn);
+    CHECK_THROWS_WITH(
+        resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::onednn, torch::kCPU),
+        Catch::Contains("disagrees with BLAS on a probe product"));
+    CHECK_FALSE(
+        resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::automatic, torch::kCPU)
+            .onednn);
   }
   for (const auto& [name, p] : paths) {
     CAPTURE(name);
@@ -179,11 +186,15 @@ TEST_CASE("frame autocast runs bf16 convolutions only in its scope and restores 
   const auto img = torch::rand({1, 3, 16, 16});
   REQUIRE(!th::compat::autocast_enabled(false));
   {
-    FrameAutocast none(resolve_products("fp32", "auto", torch::kCPU), torch::kCPU);
+    FrameAutocast none(
+        resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::automatic, torch::kCPU),
+        torch::kCPU);
     CHECK(conv->forward(img).scalar_type() == torch::kFloat);
   }
   {
-    FrameAutocast bf16(resolve_products("bf16", "auto", torch::kCPU), torch::kCPU);
+    FrameAutocast bf16(
+        resolve_products(th::PrecisionChoice::bf16, th::Fp32Products::automatic, torch::kCPU),
+        torch::kCPU);
     CHECK(th::compat::autocast_enabled(false));
     CHECK(conv->forward(img).scalar_type() == torch::kBFloat16);
   }

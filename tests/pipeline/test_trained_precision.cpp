@@ -68,16 +68,20 @@ TEST_CASE(
   torch::set_num_threads(1);
   if (!th::model::onednn_products_agree()) {
     // This LibTorch's oneDNN product is wrong (the probe compares it with BLAS): it is refused.
-    CHECK_THROWS_WITH(resolve_products("fp32", "onednn", torch::kCPU),
-                      Catch::Contains("disagrees with BLAS on a probe product"));
-    CHECK(!resolve_products("fp32", "auto", torch::kCPU).onednn);
+    CHECK_THROWS_WITH(
+        resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::onednn, torch::kCPU),
+        Catch::Contains("disagrees with BLAS on a probe product"));
+    CHECK(!resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::automatic, torch::kCPU)
+               .onednn);
     WARN(
         "oneDNN's fp32 product disagrees with BLAS in this LibTorch: only its refusal was checked");
     return;
   }
   Frames f(surface_config({"data.ratio=0.5"}));
-  const auto blas = resolve_products("fp32", "blas", torch::kCPU),
-             onednn = resolve_products("fp32", "onednn", torch::kCPU);
+  const auto blas =
+                 resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::blas, torch::kCPU),
+             onednn =
+                 resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::onednn, torch::kCPU);
   REQUIRE(!blas.onednn);
   REQUIRE(onednn.onednn);
   for (int samples : {64, 16}) {
@@ -92,8 +96,10 @@ TEST_CASE("on a trained network, bf16 products render every ray within 2e-3 of f
           "[precision][bf16]") {
   torch::set_num_threads(1);
   Frames f(surface_config({"data.ratio=0.5"}));
-  const auto fp32 = resolve_products("fp32", "blas", torch::kCPU),
-             bf16 = resolve_products("bf16", "auto", torch::kCPU);
+  const auto fp32 =
+                 resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::blas, torch::kCPU),
+             bf16 = resolve_products(th::PrecisionChoice::bf16, th::Fp32Products::automatic,
+                                     torch::kCPU);
   REQUIRE(bf16.bf16());
   for (int samples : {64, 16}) {
     CAPTURE(samples);
@@ -138,8 +144,10 @@ TEST_CASE(
     }
     return out;
   };
-  const auto a = step(resolve_products("fp32", "blas", torch::kCPU));
-  const auto b = step(resolve_products("bf16", "auto", torch::kCPU));
+  const auto a =
+      step(resolve_products(th::PrecisionChoice::fp32, th::Fp32Products::blas, torch::kCPU));
+  const auto b =
+      step(resolve_products(th::PrecisionChoice::bf16, th::Fp32Products::automatic, torch::kCPU));
   CHECK(std::abs(b.loss - a.loss) <= 0.01 * a.loss);
   int64_t nonzero = 0, underflow = 0;
   double worst = 0, largest_norm = 0, diff2 = 0, norm2 = 0;
