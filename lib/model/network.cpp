@@ -4,8 +4,6 @@
 #include <vector>
 
 #include "core/error.hpp"
-#include "geometry/camera.hpp"
-#include "model/positional_encoding.hpp"
 #include "model/spc.hpp"
 #include "model/transhe.hpp"
 
@@ -37,17 +35,46 @@ Tensor batch_norm(const BatchNormImpl& bn, const Tensor& x) {
                            batch ? Tensor() : bn.running_var, batch, 0.1, 1e-5, false);
 }
 
+// Written apart from the running code's helpers (positional_encoding, cluster_mean, the camera
+// projection), so that a bug in one of those does not pass on both sides of the equality tests.
+
 // sin(x f + phase) for f = fl32(pi) 2^j, j < num_freqs, phase 0 (sin) and fl32(pi/2) (cos):
 // (M, D) -> (M, 2 num_freqs D), [sin(f0 x), cos(f0 x), sin(f1 x), ...] (METHOD 3.2, 3.3). `fused`
 // rounds x f + phase once: float64 holds the product of two floats exactly, so the sum is rounded
 // there and then to the input's type [parity: the reference's addcmul].
 Tensor sincos(const Tensor& x, int64_t num_freqs, bool fused) {
-  const auto f = pe_frequencies(num_freqs, x.options()).view({1, -1, 1});
-  const auto phase = pe_phases(num_freqs, x.options()).view({1, -1, 1});
+  // f0 f0 f1 f1 ..., 0 pi/2 0 pi/2 ..., in x's type (pi rounded to float32 first for float32)
+  const bool f64 = x.scalar_type() == torch::kDouble;
+  const double pi = f64 ? M_PI : static_cast<double>(static_cast<float>(M_PI));
+  std::vector<double> freqs, phases;
+  for (int64_t j = 0; j < num_freqs; ++j)
+    for (const double phase : {0.0, M_PI / 2}) {
+      freqs.push_back(pi * std::ldexp(1.0, static_cast<int>(j)));
+      phases.push_back(phase);
+    }
+  const auto column = [&](const std::vector<double>& v) {
+    return torch::tensor(v, torch::kDouble).to(x.options()).view({1, -1, 1});
+  };
+  const auto f = column(freqs), phase = column(phases);
   if (!fused) return torch::sin(x.unsqueeze(1) * f + phase).flatten(1);
   const auto d = torch::kDouble;
   const auto arg = torch::addcmul(phase.to(d), x.to(d).unsqueeze(1), f.to(d)).to(x.scalar_type());
   return torch::sin(arg).flatten(1);
+}
+
+// Pinhole projection of points (N, 3) into the views (K, R, T) -> pixel coordinates (N, V, 2).
+Tensor project(const Tensor& points, const Tensor& K, const Tensor& R, const Tensor& T) {
+  const auto cam = torch::einsum("vij,nj->nvi", {R, points}) + T.reshape({1, -1, 3});
+  const auto img = torch::einsum("vij,nvj->nvi", {K, cam});
+  return img.narrow(2, 0, 2) / img.narrow(2, 2, 1);
+}
+
+// NeRF's view-direction embedder gamma(d), 4 octaves: [d, sin d, cos d, ..., sin 8d, cos 8d].
+Tensor gamma_of(const Tensor& d) {
+  std::vector<Tensor> parts{d};
+  for (const double f : {1.0, 2.0, 4.0, 8.0})
+    parts.insert(parts.end(), {torch::sin(d * f), torch::cos(d * f)});
+  return torch::cat(parts, 1);
 }
 
 // ---- METHOD 3.1: image encoder and painting -----------------------------------------------------
@@ -110,10 +137,17 @@ Tokens transhe(const TokenFieldsImpl& human, const ModelConfig& cfg, const Frame
                const Tensor& F_v, const Tensor& xs_vertices) {
   const auto labels = in.labels.to(F_v.device());
   const int64_t nt = in.num_tokens > 0 ? in.num_tokens : labels.max().item<int64_t>() + 1;
-  // Clusters without vertices (grid groupings) have no token.
-  const auto keep = cluster_counts(labels, nt).nonzero().flatten();
+  // Per-cluster means over the vertices (dim -2) as products with the one-hot membership
+  // (Nv, nt); clusters without vertices (grid groupings) have no token.
+  const auto member = F::one_hot(labels, nt);
+  const auto keep = member.sum(0).nonzero().flatten();
   const auto mean = [&](const Tensor& values, const Tensor& weights = {}) {
-    return cluster_mean(values, labels, nt, weights).index_select(-2, keep);
+    const auto m = member.to(values.scalar_type());
+    const auto w = weights.defined() ? weights.to(values.scalar_type())
+                                     : torch::ones({values.size(-2)}, values.options());
+    const auto sums = torch::matmul(m.t(), values * w.unsqueeze(-1));  // (..., nt, C)
+    const auto counts = torch::matmul(w, m).unsqueeze(-1);             // (..., nt, 1)
+    return (sums / counts.clamp_min(1)).index_select(-2, keep);
   };
   // tok_v(c): the mean over all vertices of c, invisible zeros included [parity], or over the
   // visible ones (grouping.mean_over).
@@ -256,8 +290,8 @@ NetworkOutput network_forward(const TransHumanImpl& model, const FrameInputs& in
   const auto opts = in.ref_images.options();
   const auto K = in.K.to(opts), R = in.R.to(opts), T = in.T.to(opts).reshape({-1, 3, 1});
   const auto Rh = in.Rh.to(opts), Th = in.Th.to(opts).reshape({3});
-  const auto xs = torch::mm(pts - Th, Rh);                                   // SMPL frame (N, 3)
-  const auto uv = geometry::project_views(pts, K, R, T).permute({1, 0, 2});  // (N, V, 2)
+  const auto xs = torch::mm(pts - Th, Rh);  // SMPL frame (N, 3)
+  const auto uv = project(pts, K, R, T);    // (N, V, 2)
 
   // 3.1: the pixel feature p_v of every reference view.
   const auto p_v = pixel_features(*model.encoder, in.ref_images);  // (V, 384, H, W)
@@ -270,7 +304,7 @@ NetworkOutput network_forward(const TransHumanImpl& model, const FrameInputs& in
     const auto& red = *model.encoder->reduction_layer;
     const auto holder =
         F::conv2d(p_v, red.weight, F::Conv2dFuncOptions().bias(red.bias));  // (V, 192, H, W)
-    const auto uv_vertices = geometry::project_views(vertices, K, R, T).permute({1, 0, 2});
+    const auto uv_vertices = project(vertices, K, R, T);
     // F_v(i) = holder_v(uv_v(i)), zero where vertex i is invisible in view v: (V, Nv, 192).
     const auto visibility = in.visibility.to(holder.device(), holder.scalar_type());
     const auto F_v =
@@ -305,7 +339,7 @@ NetworkOutput network_forward(const TransHumanImpl& model, const FrameInputs& in
   const auto& heads = *model.heads;
   NetworkOutput out;
   out.sigma = linear(heads.alpha_fc, torch::relu(linear(heads.fc_3, e.mean(1)))).squeeze(1);
-  const auto gamma = direction_encoding(dirs / dirs.norm(2, 1, true));
+  const auto gamma = gamma_of(dirs / dirs.norm(2, 1, true));
   auto c = linear(heads.feature_fc, e);
   if (cfg.fdi.appearance) c = c + linear(heads.rgb_res_0, p);
   const auto gamma_v = gamma.unsqueeze(1).expand({-1, e.size(1), -1});  // (N, V, 27)

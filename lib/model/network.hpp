@@ -4,7 +4,9 @@
 // plans of TransHumanImpl (model/plan.hpp: the exact shortcuts of METHOD 9, the CPU kernels)
 // are tested against: plain LibTorch operations only, on any device and under autograd, with
 // the model's own parameters (it creates none) and each ablation of ModelConfig an `if` where
-// the paper's text varies it.
+// the paper's text varies it. It computes its positional encodings, cluster means, projections
+// and view-direction code itself rather than with the helpers the model runs, so that a bug in
+// one of those cannot pass on both sides of the equality tests.
 //
 // Everything is evaluated per call, the per-frame stages included (no FrameCache), in the
 // parameters' floating-point type (fp32: the model's products are not consulted). BatchNorm
