@@ -1,49 +1,58 @@
 #pragma once
-// METHOD 3.3: DPaRF, the deformable partial radiance fields. Each token owns a local frame
-// (origin Oc = cluster mean of the posed vertices in the SMPL frame, axes Rc = cluster mean of
-// the blended rotations, not re-orthonormalised [parity]); a query point reads its Nk nearest
-// fields, weighted by softmax(-distance / T), each with its local coordinates encoded.
+// DPaRF (METHOD 3.3) and the human representation branch h it belongs to (selected by
+// model.representation):
+// - TokenFields: TransHE tokens (METHOD 3.2, transhe.hpp) read through DPaRF: the paper's model;
+// - SPCTrilinear (spc.hpp): the NHP-style baseline of the ablations.
+// Both end in fc_0 and return s_v = relu(fc_0(h_v)) per reference view.
 
-#include <torch/types.h>
+#include <torch/torch.h>
+
+#include <memory>
 
 #include "core/config.hpp"
+#include "model/frame_cache.hpp"
+#include "model/inputs.hpp"
+#include "model/precision.hpp"
+#include "model/transhe.hpp"
 
 namespace th::model {
 
-struct TokenFrames {
-  torch::Tensor origins;    // (Nt, 3) Oc, SMPL frame
-  torch::Tensor rotations;  // (Nt, 3, 3) Rc
-};
-
-// xs_vertices: (Nv, 3) posed vertices in the SMPL frame; A: (Nv, 3, 3); labels: (Nv) int64.
-TokenFrames token_frames(const torch::Tensor& xs_vertices, const torch::Tensor& A,
-                         const torch::Tensor& labels, int64_t num_tokens);
-
-// The Nk nearest fields of N points.
-struct FieldQuery {
-  torch::Tensor index;   // (N, Nk) int64 token ids, nearest first
-  torch::Tensor weight;  // (N, Nk) w_k = softmax_k(-d_k / T)
-  torch::Tensor coords;  // (N, G): sum_k w_k g_k (relative), PE(xs) (absolute); undefined (none)
-};
-
-class DPaRF {
+class HumanRepresentation : public torch::nn::Module {
  public:
-  // The coordinate encoding's form (relative, absolute or none) is chosen here, once.
-  explicit DPaRF(const DPaRFConfig& config);
+  // The per-frame part: the painted body -> the human stage of the frame state.
+  virtual HumanStage prepare(const FrameInputs& in, const PaintedBody& body) = 0;
+  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32. `stage` is
+  // what prepare() made; `products` run the per-point products.
+  virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                                const Products& products) = 0;
+};
 
-  // Width G of the coordinate encoding: 63 for relative/absolute (10 frequencies), 0 for none.
-  int64_t coord_dim() const {
-    return config_.coordinate == Coordinate::none ? 0 : 3 + 6 * config_.pe_freqs;
-  }
+// TransHE (tokens, transhe.hpp) + DPaRF (METHOD 3.3) + fc_0 (reference names: ViT.*, fc_0.*).
+// DPaRF: each token owns a local frame (origin Oc, axes Rc: frame_cache.hpp's TokenFrames); a
+// point reads its Nk nearest fields weighted by softmax(-distance / T), h_v = sum_k w_k [T_v(k),
+// g_k] with g_k the encoded local coordinates Rc(k)^T (xs - Oc(k)) (or the point's own, or none),
+// and s_v = relu(fc_0(h_v)). With METHOD 9's exact shortcut: fc_0 is linear and the weights sum
+// to 1, so fc_0's token part is applied to the Nt tokens once per frame (the token table) and read
+// per point by a weighted gather of the Nk nearest rows, plus fc_0 of sum_k w_k g_k.
+class TokenFieldsImpl : public HumanRepresentation {
+ public:
+  explicit TokenFieldsImpl(const ModelConfig& config);
 
-  // xs: (N, 3) points in the SMPL frame. The nearest fields, their weights and the local
-  // coordinates' encoding arguments in one pass per point (model/kernels/nearest_fields.hpp),
-  // then the coordinate encoding.
-  FieldQuery query(const TokenFrames& frames, const torch::Tensor& xs) const;
+  HumanStage prepare(const FrameInputs& in, const PaintedBody& body) override;
+  torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
+                        const Products& products) override;
+
+  // Width of g_k: 63 for relative/absolute coordinates (10 frequencies), 0 for none.
+  int64_t coord_dim() const;
+
+  TransHE vit{nullptr};  // null: the "w/o TransHE" ablation
+  torch::nn::Linear fc_0{nullptr};
 
  private:
-  DPaRFConfig config_;
-  bool fused_;  // pe_rounding: fused [parity] (METHOD 3.3)
+  ModelConfig config_;
 };
+
+// Factory: the representation named by config.representation.
+std::shared_ptr<HumanRepresentation> make_human_representation(const ModelConfig& config);
 
 }  // namespace th::model

@@ -3,6 +3,7 @@
 #include <ATen/Parallel.h>
 
 #include "core/error.hpp"
+#include "io/npy.hpp"
 
 namespace th::model {
 namespace {
@@ -186,6 +187,11 @@ std::vector<torch::Tensor> ResNetTrunkImpl::forward(const torch::Tensor& x) {
   return {l0, l1, l2};
 }
 
+torch::Tensor to_table(const torch::Tensor& map) {
+  TORCH_CHECK(map.dim() == 4, "feature map must be (V, C, h, w), got ", map.sizes());
+  return map.permute({0, 2, 3, 1}).reshape({-1, map.size(1)});
+}
+
 // ---- geometry of sampling --------------------------------------------------------------------
 
 Taps PixelGeometry::stacked_level_taps(const torch::Tensor& uv, const torch::Tensor& view) const {
@@ -264,14 +270,6 @@ torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc, const 
     parts.push_back(F::linear(rgb, upsample_color->weight.flatten(1), upsample_color->bias));
   }
   return torch::cat(parts, 1);
-}
-
-torch::Tensor EncoderImpl::sample_pixel_features(const EncodedViews& enc,
-                                                 const torch::Tensor& uv) const {
-  const auto [flat, view] = PixelGeometry::point_view_rows(uv);
-  return sample_pixel_features(enc, enc.geometry.stacked_level_taps(flat, view),
-                               enc.geometry.image_taps(flat, view))
-      .view({uv.size(0), uv.size(1), -1});
 }
 
 std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(
@@ -355,8 +353,10 @@ torch::Tensor EncoderImpl::paint(const EncodedViews& enc, const torch::Tensor& u
          visibility.unsqueeze(-1).to(holder.device(), holder.scalar_type());
 }
 
-void EncoderImpl::load_resnet_state(const std::map<std::string, torch::Tensor>& state,
-                                    const std::string& source) {
+void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz) {
+  const auto state = io::read_npz(npz);
+  const auto source = npz.string();
+  auto& model = encoder.model;
   torch::NoGradGuard no_grad;
   auto assign = [&](const std::string& name, torch::Tensor& dst) {
     const auto it = state.find(name);

@@ -4,22 +4,29 @@
 // painting of the body.
 //
 // The pixel feature is the concatenation of three bilinearly upsampled ResNet levels and a 1x1
-// convolution of the raw image. It is never materialised at full resolution: sampling goes
-// through model/sampling.hpp (exact), and per-pixel linear layers that follow p_v are applied to
-// each level before sampling (METHOD 9), see PixelReadout.
+// convolution of the raw image. It is never materialised at full resolution: sampling reads
+// each level at the taps of its upsampled map (kernels::level_taps, exact), and per-pixel linear
+// layers that follow p_v are applied to each level before sampling (METHOD 9), see PixelReadout.
 
 #include <torch/torch.h>
 
+#include <filesystem>
 #include <functional>
-#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "core/config.hpp"
-#include "model/sampling.hpp"
+#include "model/kernels/gather.hpp"
 
 namespace th::model {
+
+// What a stage of the per-frame state shows of its tensors: fn(tensor, its gradient-sink slot,
+// or null when it has none).
+using TensorVisitor = std::function<void(torch::Tensor& tensor, torch::Tensor* grad_sink)>;
+
+// (V, C, h, w) map -> (V * h * w, C) channels-last table for weighted_gather.
+torch::Tensor to_table(const torch::Tensor& map);
 
 // Sums a float64 tensor in place over the data-parallel ranks: what synchronised BatchNorm
 // needs of the ranks (train/ supplies it from the communicator; the model knows no ranks).
@@ -128,7 +135,7 @@ struct PixelWindows {
                                       int64_t W) const;
 };
 
-// A readout in window form (inference, model/shortcuts.hpp): y at every pixel of the windows,
+// A readout in window form (inference, model/pixels.hpp): y at every pixel of the windows,
 // stacked as PixelWindows orders them, and the layer itself for points outside the windows.
 struct WindowReadout {
   torch::Tensor table;               // (rows, Cout)
@@ -151,8 +158,6 @@ class EncoderImpl : public torch::nn::Module {
   // p_v at M points without materialising it; returns (M, 384).
   torch::Tensor sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                       const Taps& image_taps) const;
-  // The same at projections uv (N, V, 2) of the views -> (N, V, 384).
-  torch::Tensor sample_pixel_features(const EncodedViews& enc, const torch::Tensor& uv) const;
   // Per-level precomputation of y = W p + b. weight: (Cout, 384), bias: (Cout).
   PixelReadout make_readout(const EncodedViews& enc, const torch::Tensor& weight,
                             const torch::Tensor& bias) const;
@@ -162,15 +167,16 @@ class EncoderImpl : public torch::nn::Module {
   torch::Tensor paint(const EncodedViews& enc, const torch::Tensor& uv,
                       const torch::Tensor& visibility) const;
 
-  // Loads torchvision resnet18 weights (names conv1.weight, bn1.running_mean, layer1.0...;
-  // layer3/layer4/fc are ignored). Throws th::Error naming a missing or mis-shaped key.
-  void load_resnet_state(const std::map<std::string, torch::Tensor>& state,
-                         const std::string& source);
-
   ResNetTrunk model{nullptr};
   torch::nn::Conv2d reduction_layer{nullptr},
       upsample_color{nullptr};  // upsample_color: null w/o RGB
 };
 TORCH_MODULE(Encoder);
+
+// ImageNet ResNet-18 weights for the encoder's trunk (METHOD 3.1): an .npz with torchvision's
+// resnet18 state dict names (conv1.weight, bn1.running_mean, layer1.0...; layer3, layer4 and fc
+// are ignored), written by scripts/export_pretrained.py. Throws th::Error naming a missing or
+// mis-shaped key. (Whole models: pipeline/checkpoint.hpp, pipeline/reference_import.hpp.)
+void load_pretrained_encoder(EncoderImpl& encoder, const std::filesystem::path& npz);
 
 }  // namespace th::model

@@ -1,5 +1,7 @@
 #include "model/fdi.hpp"
 
+#include "model/kernels/view_attention.hpp"
+
 namespace th::model {
 
 FDIImpl::FDIImpl(const FDIConfig& config, int64_t pixel_channels) {
@@ -18,36 +20,39 @@ FDIImpl::FDIImpl(const FDIConfig& config, int64_t pixel_channels) {
 
 // fc_1 is linear: folded into both value projections; each key projection shares one product
 // with its value projection. fc_1's bias joins the query side where there is one (the attention
-// weights multiply the value side).
-
+// weights multiply the value side), the appearance side otherwise ("w/o h" adds it in forward).
 FDIFolded FDIImpl::fold() const {
-  return key0 && key1 ? fold_cross() : key0 ? fold_self() : fold_human_only();
-}
-
-FDIFolded FDIImpl::fold_cross() const {
   const auto& W1 = fc_1->weight;
   FDIFolded f;
-  f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
-  f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
-  f.w1 = torch::cat({key1->weight, torch::mm(W1, value1->weight)}, 0);
-  f.b1 = torch::cat({key1->bias, torch::mv(W1, value1->bias) + fc_1->bias}, 0);
+  if (key0) {
+    f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
+    f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
+  }
+  if (value1) {
+    const auto w = torch::mm(W1, value1->weight), b = torch::mv(W1, value1->bias) + fc_1->bias;
+    f.w1 = key0 ? torch::cat({key1->weight, w}, 0) : w;  // w/o a: no attention, no key
+    f.b1 = key0 ? torch::cat({key1->bias, b}, 0) : b;
+  }
   return f;
 }
 
-FDIFolded FDIImpl::fold_self() const {
-  const auto& W1 = fc_1->weight;
-  FDIFolded f;
-  f.w0 = torch::cat({key0->weight, torch::mm(W1, value0->weight)}, 0);
-  f.b0 = torch::cat({key0->bias, torch::mv(W1, value0->bias)}, 0);
-  return f;
-}
-
-FDIFolded FDIImpl::fold_human_only() const {
-  const auto& W1 = fc_1->weight;
-  FDIFolded f;
-  f.w1 = torch::mm(W1, value1->weight);
-  f.b1 = torch::mv(W1, value1->bias) + fc_1->bias;
-  return f;
+// o_v = r_v + sum_j softmax_j(q_v . k_j / sqrt(d)) u_j with q, r from s_v and k, u from a_v;
+// fc_1 is already in r and u (and its bias in r), so `pre` is fc_1(o_v) before its ReLU.
+torch::Tensor FDIImpl::forward(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
+                               const Products& P) const {
+  const int64_t d = key0 ? key0->weight.size(0) : 0;  // the attention's key width
+  torch::Tensor pre;
+  if (key0 && key1) {  // the view attention kernel takes fp32
+    pre = kernels::view_attention(Products::fp32(P.linear(s, f.w1, f.b1)),
+                                  Products::fp32(P.linear(a, f.w0, f.b0)), d);
+  } else if (key0) {  // w/o h: the appearance keys attend to each other
+    const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
+    const auto k = kv.narrow(2, 0, d), u = kv.narrow(2, d, kv.size(2) - d);
+    pre = torch::baddbmm(u + fc_1->bias, kernels::view_attention_weights(k, k), u);
+  } else {  // w/o a: fc_1(value1(s_v))
+    pre = P.linear(s, f.w1, f.b1);
+  }
+  return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();  // e_v
 }
 
 }  // namespace th::model

@@ -6,9 +6,9 @@
 // the transformer and the layer weights (training).
 //
 // A stage that varies holds one of its forms (std::variant): the ablation's (no pixels, no
-// human branch, the SPC baseline) or, for the pixel stage, the one its plan takes where it runs
-// (readout windows for inference on CPU, model/plan.hpp). Each form lists its tensors in `visit`; a
-// test walks the autograd graph of the per-point network and fails when it reaches per-frame work
+// human branch, the SPC baseline) or, for the pixel stage, the one that suits where it runs
+// (readout windows for inference on CPU, model/pixels.hpp). Each form lists its tensors in `visit`;
+// a test walks the autograd graph of the per-point network and fails when it reaches per-frame work
 // through a tensor that no stage visits (tests/model/test_frame_cache.cpp). Parameters that a stage
 // merely refers to are leaves already and are not visited.
 
@@ -19,7 +19,6 @@
 #include <variant>
 #include <vector>
 
-#include "model/dparf.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/heads.hpp"
@@ -34,6 +33,14 @@ struct FrameGeometry {
   // Distance to the body for culling (METHOD 4, 9); null when prepared without a culling distance.
   std::shared_ptr<const render::BodyDistance> body;
   void visit(const TensorVisitor& fn);
+};
+
+// DPaRF's token frames (METHOD 3.3): each token's origin Oc (the cluster mean of the posed
+// vertices in the SMPL frame) and axes Rc (the cluster mean of the blended rotations A, not
+// re-orthonormalised [parity]).
+struct TokenFrames {
+  torch::Tensor origins;    // (Nt, 3) Oc, SMPL frame
+  torch::Tensor rotations;  // (Nt, 3, 3) Rc
 };
 
 // The painted body (METHOD 3.1): the reference views' holder features at the body's vertices,
@@ -56,7 +63,7 @@ struct PixelReadouts {
   PixelReadout alpha, color;
   void visit(const TensorVisitor& fn);
 };
-// Readout windows (inference on CPU, model/shortcuts.hpp): the readouts at full resolution on a
+// Readout windows (inference on CPU, model/pixels.hpp): the readouts at full resolution on a
 // rectangle of each view around the body; the encoder's levels serve the points outside them.
 struct WindowReadouts {
   EncodedViews enc;
@@ -97,7 +104,6 @@ struct FoldedWeights {
 };
 
 struct FrameCache {
-  bool training = false;  // made by the training plan (autograd recorded), else the inference one
   FrameGeometry geometry;
   PixelStage pixels;
   HumanStage human;

@@ -1,6 +1,6 @@
 #include "model/heads.hpp"
 
-#include "model/positional_encoding.hpp"
+#include "model/kernels/encoding.hpp"
 
 namespace th::model {
 
@@ -8,7 +8,8 @@ HeadsImpl::HeadsImpl(bool appearance, int64_t pixel_channels) {
   fc_3 = register_module("fc_3", torch::nn::Linear(256, 256));
   alpha_fc = register_module("alpha_fc", torch::nn::Linear(256, 1));
   feature_fc = register_module("feature_fc", torch::nn::Linear(256, 256));
-  view_fc = register_module("view_fc", torch::nn::Linear(256 + kDirectionEncodingDim, 128));
+  view_fc =
+      register_module("view_fc", torch::nn::Linear(256 + kernels::kDirectionEncodingDim, 128));
   fc_4 = register_module("fc_4", torch::nn::Linear(128, 128));
   rgb_fc = register_module("rgb_fc", torch::nn::Linear(128, 3));
   if (appearance) {
@@ -17,20 +18,39 @@ HeadsImpl::HeadsImpl(bool appearance, int64_t pixel_channels) {
   }
 }
 
-HeadsFolded HeadsImpl::fold_plain() const {
+HeadsFolded HeadsImpl::fold() const {
   HeadsFolded f;
   const auto wc = view_fc->weight.narrow(1, 0, 256);
   f.e_weight = torch::mm(wc, feature_fc->weight);
   f.e_bias = torch::mv(wc, feature_fc->bias) + view_fc->bias;
+  if (rgb_res_0) {  // w/o a: no readout of p_v
+    f.readout_weight = torch::cat({torch::mm(wc, rgb_res_0->weight), rgb_res_1->weight}, 0);
+    f.readout_bias = torch::cat({torch::mv(wc, rgb_res_0->bias), rgb_res_1->bias}, 0);
+  }
   return f;
 }
 
-HeadsFolded HeadsImpl::fold_pixels() const {
-  HeadsFolded f = fold_plain();
-  const auto wc = view_fc->weight.narrow(1, 0, 256);
-  f.readout_weight = torch::cat({torch::mm(wc, rgb_res_0->weight), rgb_res_1->weight}, 0);
-  f.readout_bias = torch::cat({torch::mv(wc, rgb_res_0->bias), rgb_res_1->bias}, 0);
-  return f;
+torch::Tensor HeadsImpl::density(const torch::Tensor& e, const Products& P) const {
+  const auto h = P.linear(Products::fp32(e).mean(1), fc_3->weight, fc_3->bias).relu_();
+  return P.linear_fp32(h, alpha_fc->weight, alpha_fc->bias).squeeze(1);
+}
+
+// view_fc(cat(c, gamma)) = (view_fc_c . feature_fc) e + view_fc_c rgb_res_0(p) + view_fc_d gamma
+// + b, with the pixel side read as one readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v.
+torch::Tensor HeadsImpl::colour(const HeadsFolded& f, const torch::Tensor& e,
+                                const torch::Tensor& readout, const torch::Tensor& dir_code,
+                                const Products& P) const {
+  const auto direction =
+      P.linear_fp32(dir_code, view_fc->weight.narrow(1, 256, kernels::kDirectionEncodingDim));
+  auto c = Products::fp32(P.linear(e, f.e_weight, f.e_bias)).add_(direction.unsqueeze(1));
+  if (rgb_res_0) {
+    const int64_t half = readout.size(2) / 2;
+    c = c.add_(readout.narrow(2, 0, half)).relu_() + readout.narrow(2, half, half);
+  } else {  // w/o a: no readout of p_v
+    c = c.relu_();
+  }
+  const auto h = P.linear_fp32(c.mean(1), fc_4->weight, fc_4->bias).relu_();
+  return P.linear_fp32(h, rgb_fc->weight, rgb_fc->bias);
 }
 
 }  // namespace th::model

@@ -1,8 +1,8 @@
 #pragma once
-// Mixed precision: which operation of the network runs in which floating-point type. The
-// Products a plan is built with (model/plan.hpp) decide it: the plan calls Products::linear for
-// its per-point products, Products::fp32 where their outputs meet fp32 work, and FrameAutocast
-// around the per-frame modules. No function takes the precision as an argument.
+// Mixed precision: which operation of the network runs in which floating-point type. The model's
+// Products (TransHumanImpl::set_products) decide it: the per-point stages call Products::linear
+// for their products, Products::fp32 where their outputs meet fp32 work, and the definition puts
+// FrameAutocast around the per-frame modules.
 //
 // What runs in which type:
 // - per-point products (FDI's key/value projections and fc_2, the density head's fc_3, the

@@ -5,7 +5,7 @@
 // sparse ones) and read at the query point by trilinear interpolation. Ends in fc_0 like the
 // token representation.
 
-#include "model/human.hpp"
+#include "model/dparf.hpp"
 
 namespace th::model {
 

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "model/positional_encoding.hpp"
+#include "model/kernels/encoding.hpp"
 
 namespace th::model {
 namespace {
@@ -109,8 +109,8 @@ TransHEImpl::TransHEImpl(const TransHEConfig& config_) : config(config_) {
 }
 
 torch::Tensor TransHEImpl::encode_positions(const torch::Tensor& positions) const {
-  return sincos_encoding(positions, config.pe_freqs, false,
-                         config.pe_rounding == PeRounding::fused);
+  return kernels::sincos_encoding(positions, config.pe_freqs, false,
+                                  config.pe_rounding == PeRounding::fused);
 }
 
 torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Tensor& positions) {
@@ -121,45 +121,6 @@ torch::Tensor TransHEImpl::forward(const torch::Tensor& tokens, const torch::Ten
   auto x = tokens + encode_positions(positions).unsqueeze(0);
   for (const auto& block : *blocks) x = block->as<Block>()->forward(x);
   return norm(x);
-}
-
-TokenRecipe token_recipe(const ModelConfig& config) {
-  TokenRecipe r{[](const FrameInputs&) { return torch::Tensor(); },
-                [](const FrameInputs& in, const PaintedBody&) -> const torch::Tensor& {
-                  return in.canonical;
-                },
-                config.transhe.pe_scale};
-  if (config.grouping.mean_over == MeanOver::visible)
-    r.weights = [](const FrameInputs& in) { return in.visibility; };
-  if (config.transhe.position == TokenPosition::observation)
-    r.position_source = [](const FrameInputs&, const PaintedBody& body) -> const torch::Tensor& {
-      return body.xs_vertices;
-    };
-  return r;
-}
-
-FrameTokens build_tokens(TransHEImpl* vit, const TokenRecipe& recipe, const FrameInputs& in,
-                         const PaintedBody& body) {
-  const auto& painted = body.features;
-  const auto device = painted.device();
-  const auto labels = in.labels.to(device);
-  const int64_t nt = in.num_tokens > 0 ? in.num_tokens : labels.max().item<int64_t>() + 1;
-  FrameTokens t;
-  t.keep = cluster_counts(labels, nt).nonzero().flatten();
-  auto weights = recipe.weights(in);
-  if (weights.defined()) weights = weights.to(device);
-  auto feats = cluster_mean(painted, labels, nt, weights).index_select(1, t.keep);
-  // METHOD 3.2: token positions from the canonical body (v_template, float64 means [parity]) or,
-  // for the observation-space ablation, from the posed body in the SMPL frame.
-  const auto& source = recipe.position_source(in, body);
-  const auto means =
-      cluster_mean(source.to(device, torch::kDouble), labels, nt).index_select(0, t.keep);
-  t.positions = normalize_token_positions(means, recipe.pe_scale, painted);
-  t.features = vit ? vit->forward(feats, t.positions) : feats;
-  const auto& xs = body.xs_vertices;
-  auto frames = token_frames(xs, in.A.to(device, xs.scalar_type()), labels, nt);
-  t.frames = {frames.origins.index_select(0, t.keep), frames.rotations.index_select(0, t.keep)};
-  return t;
 }
 
 }  // namespace th::model

@@ -6,9 +6,6 @@
 #include <torch/torch.h>
 
 #include "core/config.hpp"
-#include "model/dparf.hpp"
-#include "model/frame_cache.hpp"
-#include "model/inputs.hpp"
 
 namespace th::model {
 
@@ -71,32 +68,6 @@ class TransHEImpl : public torch::nn::Module {
   TransHEConfig config;
 };
 TORCH_MODULE(TransHE);
-
-// The tokens of one frame: the painted body averaged per token (cluster), the token positions
-// (canonical cluster means, float64 [parity], or the posed body's for the observation-space
-// ablation) normalised for the PE, TransHE over each view's tokens (`vit` null: the "w/o
-// TransHE" ablation keeps the means), and each token's DPaRF frame (METHOD 3.3). Clusters
-// without vertices (possible with grid groupings) have no token.
-struct FrameTokens {
-  torch::Tensor features;   // T_v after the transformer: (V, Nt, C)
-  torch::Tensor positions;  // (Nt, 3) normalised positions fed to the PE
-  torch::Tensor keep;       // (Nt) int64: the clusters that have a token
-  TokenFrames frames;
-};
-// How a frame's tokens are built, decided once from the config (token_recipe).
-struct TokenRecipe {
-  // The per-vertex weights of the cluster means: none (every vertex counts [parity]) or the
-  // visibility (grouping.mean_over: visible).
-  torch::Tensor (*weights)(const FrameInputs& in);
-  // The vertices whose cluster means are the token positions: the canonical body (v_template
-  // [parity]) or the posed body in the SMPL frame (transhe.position: observation).
-  const torch::Tensor& (*position_source)(const FrameInputs& in, const PaintedBody& body);
-  double pe_scale;
-};
-TokenRecipe token_recipe(const ModelConfig& config);
-
-FrameTokens build_tokens(TransHEImpl* vit, const TokenRecipe& recipe, const FrameInputs& in,
-                         const PaintedBody& body);
 
 // timm's trunc_normal_(std, a=-2, b=2) by the inverse-CDF method.
 void trunc_normal_(torch::Tensor& t, double std, double a = -2.0, double b = 2.0);

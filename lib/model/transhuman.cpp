@@ -1,20 +1,17 @@
+// The definition of the network (METHOD 3), in the paper's order: prepare() once per frame,
+// forward() and its variants per chunk of points.
 #include "model/transhuman.hpp"
 
 #include <spdlog/spdlog.h>
-#include <torch/csrc/autograd/custom_function.h>
 
-#include <algorithm>
-#include <limits>
-
-#include "core/error.hpp"
 #include "geometry/camera.hpp"
-#include "model/kernels/forms.hpp"
-#include "model/positional_encoding.hpp"
-#include "model/pretrained.hpp"
+#include "model/kernels/encoding.hpp"
+#include "model/pixels.hpp"
 #include "render/body_distance.hpp"
-#include "render/chunks.hpp"
 
 namespace th::model {
+
+using render::ScopedTimer;
 
 TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
   encoder =
@@ -30,37 +27,13 @@ TransHumanImpl::TransHumanImpl(const ModelConfig& config) : config_(config) {
   heads = register_module("heads", Heads(config.fdi.appearance, encoder->pixel_channels()));
 }
 
-void TransHumanImpl::set_profile(render::Profile* profile) {
-  profile_ = profile;
-  plans_[0] = plans_[1] = nullptr;
-}
-
-void TransHumanImpl::set_products(const Products& products) {
-  products_ = products;
-  plans_[0] = plans_[1] = nullptr;
-}
-
-const Plan& TransHumanImpl::plan(bool training, const torch::Device& device) {
-  auto& plan = plans_[training ? 1 : 0];
-  const bool cpu_kernels = kernels::cpu_kernels(device);
-  if (!plan || plan->target().device != device || plan->target().cpu_kernels != cpu_kernels) {
-    plan = std::make_shared<const Plan>(*this, PlanTarget{products_, device, training, cpu_kernels},
-                                        profile_);
-  }
-  return *plan;
-}
-
-const Plan& TransHumanImpl::plan_of(const FrameCache& cache) {
-  return plan(cache.training, cache.geometry.K.device());
-}
+// ---- once per frame (METHOD 3.1-3.2) ------------------------------------------------------------
 
 FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) {
   in.check();
-  FrameCache cache;
-  cache.training = torch::GradMode::is_enabled();
+  FrameCache frame;
   const auto opts = in.ref_images.options();
-  const Plan& plan = this->plan(cache.training, opts.device());
-  auto& geo = cache.geometry;
+  auto& geo = frame.geometry;
   geo.K = in.K.to(opts);
   geo.R = in.R.to(opts);
   geo.T = in.T.to(opts).reshape({-1, 3, 1});
@@ -69,237 +42,140 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
   if (cull_distance > 0)
     geo.body = std::make_shared<render::BodyDistance>(in.vertices, cull_distance);
 
-  const auto enc = plan.encode(in.ref_images);  // the encoder (METHOD 3.1)
-  cache.network = plan.weights();               // the layers' weights, folded (9)
+  // 3.1 The encoder: the ResNet levels L0, L1, L2 of the reference images. The pixel feature p_v
+  // is their upsampled concatenation with a convolution of the image; it is read, never formed.
+  EncodedViews enc;
+  {
+    ScopedTimer timer(profile_, "encoder");
+    FrameAutocast autocast(products_, opts.device());
+    enc = encoder->forward(in.ref_images);
+  }
+  for (auto& level : enc.levels) level = Products::fp32(level);
+  frame.network = {fdi->fold(), heads->fold()};  // the per-point layers, folded (METHOD 9)
+
   if (human) {
-    // Painting, then the human representation: TransHE tokens and DPaRF frames, or SPC (3.1-3.3).
+    // 3.1 Painting: F_v, the holder features at the vertices' projections, zero where a vertex is
+    // invisible in a view.
     PaintedBody body;
     const auto vertices = in.vertices.to(opts);
-    const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
-    body.features = plan.paint(enc, uv, in.visibility);
+    {
+      ScopedTimer timer(profile_, "painting");
+      const auto uv = geometry::project_views(vertices, geo.K, geo.R, geo.T);
+      body.features = encoder->paint(enc, uv, in.visibility);
+    }
     body.xs_vertices = torch::mm(vertices - geo.Th, geo.Rh);
-    cache.human = plan.represent(in, body);
+    // 3.2 TransHE's tokens T_v and DPaRF's token frames (Oc, Rc), or the SPC baseline's volume.
+    ScopedTimer timer(profile_, "transhe");
+    {
+      FrameAutocast autocast(products_, opts.device());
+      frame.human = human->prepare(in, body);
+    }
+    std::visit(
+        [](auto& stage) {
+          stage.visit([](torch::Tensor& t, torch::Tensor*) {
+            if (t.defined()) t = Products::fp32(t);
+          });
+        },
+        frame.human);
   }
-  // What per-point sampling reads of the encoder output (FDI's appearance branch, the colour head).
-  cache.pixels = plan.pixels(enc, geo, in.vertices, cull_distance, cache.network);
-  return cache;
+  // What the per-point stages read of p_v: alpha_res_0 and the colour head's readout.
+  ScopedTimer timer(profile_, "readouts");
+  frame.pixels =
+      prepare_pixels(*encoder, enc, *fdi, frame.network.heads, geo, in.vertices, cull_distance);
+  return frame;
 }
 
-TransHumanImpl::Trunk TransHumanImpl::trunk(const Plan& plan, const FrameCache& cache,
-                                            const torch::Tensor& pts) {
+// ---- per chunk of points (METHOD 3.3-3.4) -------------------------------------------------------
+
+TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& frame, const torch::Tensor& pts) {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "pts must be (N, 3), got ", pts.sizes());
-  const auto& geo = cache.geometry;
-  torch::Tensor s;  // s_v, the human representation at the points (METHOD 3.3)
-  if (human) s = plan.human(cache, torch::mm(pts - geo.Th, geo.Rh));
-  // The points' projections into the reference views, and a_v (METHOD 3.4).
+  const auto& geo = frame.geometry;
+  // 3.3 s_v: the human representation of every reference view at the points (SMPL frame).
+  torch::Tensor s;
+  if (human) {
+    ScopedTimer timer(profile_, "dparf");
+    s = human->forward(frame.human, torch::mm(pts - geo.Th, geo.Rh), products_);
+  }
+  // 3.4 a_v = relu(alpha_res_0(p_v)) at the points' projections uv into the reference views.
   const auto uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
-  auto a = plan.appearance(cache, uv);
+  torch::Tensor a;
+  {
+    ScopedTimer timer(profile_, "sampling");
+    a = sample_pixels(frame.pixels, *encoder, uv, PixelLayer::appearance);
+  }
   if (a.defined()) a.relu_();
-  return {plan.fuse(cache, s, a), uv};  // e_v = FDI(s_v, a_v)
+  // 3.4 FDI: e_v from the views' attention of s_v over a_v.
+  ScopedTimer timer(profile_, "fdi");
+  return {fdi->forward(frame.network.fdi, s, a, products_), uv};
 }
 
-torch::Tensor TransHumanImpl::color(const Plan& plan, const FrameCache& cache, const Trunk& t,
-                                    const torch::Tensor& dirs) {
-  const auto pixels = plan.colour_pixels(cache, t.uv);  // p_v, or its folded readout
-  const auto code = direction_encoding(dirs / dirs.norm(2, 1, true));
-  return plan.colour(cache, t.e, pixels, code);
+// 3.4 The density head: sigma_raw from the mean of e_v over the views.
+torch::Tensor TransHumanImpl::density(const Trunk& t) {
+  ScopedTimer timer(profile_, "heads");
+  return heads->density(t.e, products_);
 }
 
-torch::Tensor TransHumanImpl::forward(const FrameCache& cache, const torch::Tensor& pts,
+// What the colour head reads of p_v at the points (rgb_res_0, rgb_res_1, folded).
+torch::Tensor TransHumanImpl::colour_readout(const FrameCache& frame, const Trunk& t) {
+  ScopedTimer timer(profile_, "sampling");
+  return sample_pixels(frame.pixels, *encoder, t.uv, PixelLayer::colour);
+}
+
+// 3.4 The colour head: rgb logits from e_v, p_v and the view direction's code gamma(d).
+torch::Tensor TransHumanImpl::colour(const FrameCache& frame, const Trunk& t,
+                                     const torch::Tensor& readout, const torch::Tensor& dirs) {
+  const auto code = kernels::direction_encoding(dirs / dirs.norm(2, 1, true));
+  ScopedTimer timer(profile_, "heads");
+  return heads->colour(frame.network.heads, t.e, readout, code, products_);
+}
+
+torch::Tensor TransHumanImpl::forward(const FrameCache& frame, const torch::Tensor& pts,
                                       const torch::Tensor& dirs) {
-  const Plan& plan = plan_of(cache);
-  const auto t = trunk(plan, cache, pts);
-  const auto sigma = plan.density(t.e);
-  const auto rgb = color(plan, cache, t, dirs);
+  const auto t = trunk(frame, pts);
+  const auto sigma = density(t);
+  const auto rgb = colour(frame, t, colour_readout(frame, t), dirs);
   return torch::cat({rgb, sigma.unsqueeze(1)}, 1);
 }
 
-torch::Tensor TransHumanImpl::density(const FrameCache& cache, const torch::Tensor& pts) {
-  const Plan& plan = plan_of(cache);
-  return plan.density(trunk(plan, cache, pts).e);
+torch::Tensor TransHumanImpl::density(const FrameCache& frame, const torch::Tensor& pts) {
+  return density(trunk(frame, pts));
 }
 
-TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& cache,
+TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& frame,
                                                                   const torch::Tensor& pts,
                                                                   const torch::Tensor& directions) {
   TORCH_CHECK(directions.dim() == 2 && directions.size(1) == 3,
               "forward_directions: directions must be (K, 3), got ", directions.sizes());
-  const Plan& plan = plan_of(cache);
-  const auto t = trunk(plan, cache, pts);
+  const auto t = trunk(frame, pts);
   DirectionalRaw out;
-  out.sigma = plan.density(t.e);
-  const auto pixels = plan.colour_pixels(cache, t.uv);
+  out.sigma = density(t);
+  const auto readout = colour_readout(frame, t);
   std::vector<torch::Tensor> rgb;
-  const auto unit = directions.to(pts.options()) / directions.to(pts.options()).norm(2, 1, true);
-  for (int64_t k = 0; k < unit.size(0); ++k) {
-    const auto code = direction_encoding(unit[k].unsqueeze(0).expand({pts.size(0), 3}));
-    rgb.push_back(plan.colour(cache, t.e, pixels, code));
+  for (int64_t k = 0; k < directions.size(0); ++k) {
+    const auto d = directions[k].to(pts.options()).unsqueeze(0).expand({pts.size(0), 3});
+    rgb.push_back(colour(frame, t, readout, d));
   }
   out.rgb = torch::stack(rgb);
   return out;
 }
 
-torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& cache,
+torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& frame,
                                                     const torch::Tensor& pts,
                                                     const torch::Tensor& dirs) {
-  const Plan& plan = plan_of(cache);
-  const auto t = trunk(plan, cache, pts);
-  const auto sigma = plan.density(t.e);
+  const auto t = trunk(frame, pts);
+  const auto sigma = density(t);
   const auto idx = (sigma > 0).nonzero().flatten();
   // Every point has density (a translucent model): colour for all rows, without copying the
   // trunk's (N, V, 256) output row by row.
   if (idx.size(0) == pts.size(0))
-    return torch::cat({color(plan, cache, t, dirs), sigma.unsqueeze(1)}, 1);
+    return torch::cat({colour(frame, t, colour_readout(frame, t), dirs), sigma.unsqueeze(1)}, 1);
   auto raw = torch::zeros({pts.size(0), 4}, sigma.options());
   raw.select(1, 3).copy_(sigma);
   if (idx.size(0) == 0) return raw;
   const Trunk sub{t.e.index_select(0, idx), t.uv.index_select(0, idx)};
-  raw.index_copy_(0, idx,
-                  torch::cat({color(plan, cache, sub, dirs.index_select(0, idx)),
-                              sigma.index_select(0, idx).unsqueeze(1)},
-                             1));
+  const auto rgb = colour(frame, sub, colour_readout(frame, sub), dirs.index_select(0, idx));
+  raw.index_copy_(0, idx, torch::cat({rgb, sigma.index_select(0, idx).unsqueeze(1)}, 1));
   return raw;
-}
-
-// ---- chunked evaluation with recomputation in the backward pass ------------------------------
-
-namespace {
-
-// The frame's tensors that carry a gradient, as leaves of a graph of their own (the same
-// tensors, in the same order, as the inputs of CheckpointedChunks::forward); tables read by
-// weighted_gather get a gradient sink where the CPU kernels run.
-struct LeafFrame {
-  FrameCache cache;
-  std::vector<torch::Tensor> leaves, sinks;
-
-  explicit LeafFrame(const FrameCache& frame) : cache(frame) {
-    cache.visit([&](torch::Tensor& t, torch::Tensor* sink) {
-      if (!t.defined() || !t.requires_grad()) return;
-      t = t.detach().requires_grad_(true);
-      leaves.push_back(t);
-      sinks.emplace_back();
-      if (sink && kernels::cpu_kernels(t.device())) sinks.back() = *sink = torch::zeros_like(t);
-    });
-  }
-  // The gradients of the leaves (sinks added), one per leaf.
-  torch::autograd::variable_list grads() const {
-    torch::autograd::variable_list out;
-    for (size_t i = 0; i < leaves.size(); ++i) {
-      auto g = leaves[i].grad();
-      if (sinks[i].defined()) g = g.defined() ? g + sinks[i] : sinks[i];
-      out.push_back(g.defined() ? g : torch::zeros_like(leaves[i]));
-    }
-    return out;
-  }
-};
-
-struct ChunkJob : torch::CustomClassHolder {
-  TransHumanImpl* model = nullptr;
-  FrameCache cache;
-  int64_t chunk = 0;
-  bool keep_graph = false;
-  // keep_graph: the leaf frame and each chunk's output, with its graph, from the forward pass.
-  std::unique_ptr<LeafFrame> kept;
-  std::vector<torch::Tensor> outputs;
-};
-
-torch::Tensor forward_chunks(TransHumanImpl& model, const FrameCache& cache,
-                             const torch::Tensor& pts, const torch::Tensor& dirs, int64_t chunk,
-                             bool density_first) {
-  return render::cat_chunks(pts.size(0), chunk, [&](int64_t b, int64_t e) {
-    const auto p = pts.slice(0, b, e), d = dirs.slice(0, b, e);
-    return density_first ? model.forward_density_first(cache, p, d) : model.forward(cache, p, d);
-  });
-}
-
-// Forward without a graph; backward recomputes chunk by chunk with leaf copies of the frame
-// tensors, accumulates their gradients and hands them to the outer graph (the encoder, ViT and
-// the folded weights), while parameters used per point accumulate into .grad directly.
-// Colour is evaluated only where sigma_raw > 0: elsewhere the compositing weight is 0, so
-// neither the image nor any gradient changes. With job->keep_graph the forward pass builds the
-// chunks' graphs on the leaf frame already and the backward pass only runs them, chunk by chunk
-// in the same order: the same gradients, one forward less.
-struct CheckpointedChunks : torch::autograd::Function<CheckpointedChunks> {
-  static torch::Tensor forward(torch::autograd::AutogradContext* ctx, torch::TensorList frame,
-                               const torch::Tensor& pts, const torch::Tensor& dirs,
-                               c10::intrusive_ptr<ChunkJob> job) {
-    ctx->save_for_backward({pts, dirs});
-    ctx->saved_data["job"] = c10::IValue::make_capsule(job);
-    if (!job->keep_graph)
-      return forward_chunks(*job->model, job->cache, pts, dirs, job->chunk, true);
-    torch::AutoGradMode enable(true);
-    job->kept = std::make_unique<LeafFrame>(job->cache);
-    return render::cat_chunks(pts.size(0), job->chunk, [&](int64_t b, int64_t e) {
-      job->outputs.push_back(job->model->forward_density_first(job->kept->cache, pts.slice(0, b, e),
-                                                               dirs.slice(0, b, e)));
-      return job->outputs.back().detach();
-    });
-  }
-
-  static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
-                                                 torch::autograd::variable_list grad_out) {
-    auto job = c10::static_intrusive_pointer_cast<ChunkJob>(ctx->saved_data["job"].toCapsule());
-    const auto saved = ctx->get_saved_variables();
-    const auto &pts = saved[0], &dirs = saved[1];
-    torch::AutoGradMode enable(true);
-    const auto& g = grad_out[0];
-    const int64_t n = pts.size(0);
-    torch::autograd::variable_list grads;
-    if (job->keep_graph) {
-      TORCH_CHECK(job->kept && job->outputs.size() ==
-                                   size_t(std::max<int64_t>(1, (n + job->chunk - 1) / job->chunk)),
-                  "the kept per-point graphs were already used (a second backward pass)");
-      size_t i = 0;
-      render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
-        torch::autograd::backward({job->outputs[i++]}, {g.slice(0, b, e)});
-      });
-      grads = job->kept->grads();
-      job->outputs.clear();
-      job->kept.reset();
-    } else {
-      LeafFrame leaf(job->cache);
-      render::for_each_chunk(n, job->chunk, [&](int64_t b, int64_t e) {
-        const auto raw =
-            job->model->forward_density_first(leaf.cache, pts.slice(0, b, e), dirs.slice(0, b, e));
-        torch::autograd::backward({raw}, {g.slice(0, b, e)});
-      });
-      grads = leaf.grads();
-    }
-    grads.emplace_back();  // pts
-    grads.emplace_back();  // dirs
-    grads.emplace_back();  // job
-    return grads;
-  }
-};
-
-}  // namespace
-
-FrameField::FrameField(TransHumanImpl& model, const FrameCache& cache, int64_t chunk_points,
-                       bool checkpoint, int64_t keep_graph_points)
-    : model_(model),
-      cache_(cache),
-      chunk_(chunk_points),
-      checkpoint_(checkpoint),
-      keep_graph_points_(keep_graph_points) {}
-
-torch::Tensor FrameField::raw(const torch::Tensor& pts, const torch::Tensor& dirs) {
-  if (!checkpoint_ || !torch::GradMode::is_enabled())
-    return forward_chunks(model_, cache_, pts, dirs, chunk_, false);
-  auto job = c10::make_intrusive<ChunkJob>();
-  job->model = &model_;
-  job->cache = cache_;
-  job->chunk = chunk_;
-  job->keep_graph = pts.size(0) <= keep_graph_points_;
-  std::vector<torch::Tensor> frame;
-  job->cache.visit([&](torch::Tensor& t, torch::Tensor*) {
-    if (t.defined() && t.requires_grad()) frame.push_back(t);
-  });
-  return CheckpointedChunks::apply(torch::TensorList(frame), pts, dirs, job);
-}
-
-torch::Tensor FrameField::raw_density_first(const torch::Tensor& pts, const torch::Tensor& dirs) {
-  torch::NoGradGuard no_grad;
-  return forward_chunks(model_, cache_, pts, dirs, chunk_, true);
 }
 
 std::vector<ParameterCount> parameter_counts(const TransHumanImpl& model) {

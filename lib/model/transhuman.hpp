@@ -1,9 +1,12 @@
 #pragma once
-// The composed TransHuman network (METHOD 3): encoder -> painting -> human representation
-// (TransHE + DPaRF, or the SPC baseline) -> FDI -> heads. Per-frame work happens once in
-// prepare(); forward() evaluates points. The components and their forms are chosen by the
-// ModelConfig when the model is built; how they run (precision, forms, kernels) is the plan's
-// (model/plan.hpp), built once per mode and device.
+// The TransHuman network (METHOD 3), defined in transhuman.cpp in the paper's order: what is
+// computed once per frame (prepare: encoder, painting, TransHE's tokens and DPaRF's frames,
+// METHOD 3.1-3.2) and what is computed per chunk of points (forward: DPaRF, FDI, the heads,
+// METHOD 3.3-3.4). Each ablation of the ModelConfig is a plain branch there, or a module that the
+// config leaves out. The exact shortcuts of METHOD 9 (folded weights, pixel readouts and their
+// windows, the token table, the one-pass nearest-field query, the view-attention kernel) sit
+// inside the operations the definition calls, each choosing its form by device, precision and
+// grad mode (model/kernels/forms.hpp): on CPU the project's kernels, elsewhere LibTorch's.
 
 #include <torch/torch.h>
 
@@ -12,13 +15,12 @@
 #include <vector>
 
 #include "core/config.hpp"
+#include "model/dparf.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/frame_cache.hpp"
 #include "model/heads.hpp"
-#include "model/human.hpp"
 #include "model/inputs.hpp"
-#include "model/plan.hpp"
 #include "model/precision.hpp"
 #include "render/volume.hpp"
 
@@ -30,11 +32,10 @@ class TransHumanImpl : public torch::nn::Module {
   explicit TransHumanImpl(const ModelConfig& config);
 
   // The per-frame stages (model/frame_cache.hpp), in order: frame geometry and the body-distance
-  // structure, encoder, folded weights, painting and the human
-  // representation, the pixel stage, made by the plan of the current mode: the training plan
-  // while autograd records (the tensors keep their history), the inference plan otherwise.
-  // `cull_distance` is the renderer's culling distance (render.cull_distance; 0: none): the
-  // frame's body-distance structure and the readout windows follow it.
+  // structure, encoder, folded weights, painting and the human representation, the pixel stage.
+  // While autograd records, the tensors keep their history (training). `cull_distance` is the
+  // renderer's culling distance (render.cull_distance; 0: none): the frame's body-distance
+  // structure and the readout windows follow it.
   FrameCache prepare(const FrameInputs& in, double cull_distance);
 
   // pts: (N, 3) world, dirs: (N, 3) ray directions (any length) -> raw (N, 4): rgb logits,
@@ -59,16 +60,14 @@ class TransHumanImpl : public torch::nn::Module {
   DirectionalRaw forward_directions(const FrameCache& cache, const torch::Tensor& pts,
                                     const torch::Tensor& directions);
 
-  // Per-stage wall times are added to `profile` when set (benchmarks); null: none. The plans are
-  // built again.
-  void set_profile(render::Profile* profile);
+  // Per-stage wall times are added to `profile` when set (benchmarks; the stage names of
+  // render::Profile: encoder, painting, transhe, readouts, dparf, sampling, fdi, heads); null:
+  // none.
+  void set_profile(render::Profile* profile) { profile_ = profile; }
   // The precision of the products (model/precision.hpp); fp32 through BLAS until set. The
-  // parameters and the per-frame state stay fp32 either way. The plans are built again.
-  void set_products(const Products& products);
+  // parameters and the per-frame state stay fp32 either way.
+  void set_products(const Products& products) { products_ = products; }
   const Products& products() const { return products_; }
-  // The plan of a mode (training: autograd records) on `device`, built on first use and kept
-  // until the products, the profile or the device change.
-  const Plan& plan(bool training, const torch::Device& device);
   const ModelConfig& config() const { return config_; }
   // The token groups of the weights (model/inputs.hpp): set when a checkpoint is loaded or when a
   // run computes them at its start; empty before either.
@@ -86,17 +85,16 @@ class TransHumanImpl : public torch::nn::Module {
   struct Trunk {
     torch::Tensor e, uv;
   };
-  Trunk trunk(const Plan& plan, const FrameCache& cache, const torch::Tensor& pts);
-  torch::Tensor color(const Plan& plan, const FrameCache& cache, const Trunk& t,
-                      const torch::Tensor& dirs);
-  // The plan that prepared `cache`.
-  const Plan& plan_of(const FrameCache& cache);
+  Trunk trunk(const FrameCache& frame, const torch::Tensor& pts);
+  torch::Tensor density(const Trunk& t);
+  torch::Tensor colour_readout(const FrameCache& frame, const Trunk& t);
+  torch::Tensor colour(const FrameCache& frame, const Trunk& t, const torch::Tensor& readout,
+                       const torch::Tensor& dirs);
 
   ModelConfig config_;
   TokenGroups token_groups_;
   Products products_;
   render::Profile* profile_ = nullptr;
-  std::shared_ptr<const Plan> plans_[2];  // [inference, training]
 };
 TORCH_MODULE(TransHuman);
 

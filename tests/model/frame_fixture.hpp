@@ -24,6 +24,38 @@ inline double max_abs(const torch::Tensor& a, const torch::Tensor& b) {
   return (a - b).abs().max().item<double>();
 }
 
+// grid_sample(bilinear, border, align_corners=true) of maps at pixel coordinates, with the
+// reference's normalisation u * 2 / (W - 1) - 1. map: (V, C, H, W), uv: (N, V, 2) -> (N, V, C).
+inline torch::Tensor grid_sample_pixels(const torch::Tensor& map, const torch::Tensor& uv) {
+  namespace F = torch::nn::functional;
+  const auto H = map.size(2), W = map.size(3);
+  const auto scale = torch::tensor({2.0 / (W - 1), 2.0 / (H - 1)}, uv.options());
+  const auto grid = (uv * scale - 1).permute({1, 0, 2}).unsqueeze(1);  // (V, 1, N, 2)
+  return F::grid_sample(map, grid,
+                        F::GridSampleFuncOptions()
+                            .mode(torch::kBilinear)
+                            .padding_mode(torch::kBorder)
+                            .align_corners(true))
+      .squeeze(2)
+      .permute({2, 0, 1});
+}
+
+// p_v at full resolution: the levels upsampled to the images' size (bilinear, align_corners) and
+// the raw-RGB convolution `color` (undefined w/o RGB), (V, 384, H, W).
+inline torch::Tensor pixel_feature_map(const std::vector<torch::Tensor>& levels,
+                                       const torch::Tensor& images,
+                                       const torch::nn::Conv2d& color) {
+  namespace F = torch::nn::functional;
+  const auto up = F::InterpolateFuncOptions()
+                      .size(std::vector<int64_t>{images.size(2), images.size(3)})
+                      .mode(torch::kBilinear)
+                      .align_corners(true);
+  std::vector<torch::Tensor> p;
+  for (const auto& level : levels) p.push_back(F::interpolate(level, up));
+  if (color) p.push_back(torch::conv2d(images, color->weight, color->bias));
+  return torch::cat(p, 1);
+}
+
 inline torch::Tensor rotation_y(double a) {
   return torch::tensor(
              {std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)},
@@ -187,9 +219,21 @@ class PythonReference {
 
   // Runs the command; returns the outputs by name.
   std::map<std::string, torch::Tensor> run(const std::string& command) {
-    std::ofstream((dir_ / "manifest.txt").string()) << manifest_;
-    const int rc = run_python("tests/python/model_reference.py", command + " " + dir_.string());
+    run_all(command, {this});
+    return outputs();
+  }
+  // Runs the command once over several inputs' folders (one Python process); each reads its
+  // outputs with outputs().
+  static void run_all(const std::string& command, const std::vector<PythonReference*>& refs) {
+    std::string dirs;
+    for (auto* r : refs) {
+      std::ofstream((r->dir_ / "manifest.txt").string()) << r->manifest_;
+      dirs += " " + r->dir_.string();
+    }
+    const int rc = run_python("tests/python/model_reference.py", command + dirs);
     if (rc != 0) throw std::runtime_error("model_reference.py " + command + " failed");
+  }
+  std::map<std::string, torch::Tensor> outputs() const {
     std::map<std::string, torch::Tensor> out;
     std::ifstream m((dir_ / "out_manifest.txt").string());
     std::string line;

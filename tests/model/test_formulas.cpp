@@ -4,15 +4,12 @@
 
 #include <catch2/catch.hpp>
 
-#include "model/dparf.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/encoding.hpp"
 #include "model/kernels/nearest_fields.hpp"
 #include "model/kernels/view_attention.hpp"
-#include "model/network.hpp"
-#include "model/positional_encoding.hpp"
-#include "model/shortcuts.hpp"
 #include "model/transhe.hpp"
 #include "model/transhuman.hpp"
 #include "render/volume.hpp"
@@ -33,14 +30,14 @@ TEST_CASE("positional encodings: layout and float32 values match numpy", "[model
   const auto ref = py.run("pe");
   // The 32-frequency token PE: arguments up to 2^31 pi make it pseudo-random, yet value by value
   // equal to numpy's separately rounded float32 evaluation (up to sin's last-bit rounding).
-  const auto pe32 = sincos_encoding(x, 32, false);
+  const auto pe32 = kernels::sincos_encoding(x, 32, false);
   REQUIRE(pe32.sizes() == ref.at("pe32").sizes());
   CHECK(max_abs(pe32, ref.at("pe32")) < 1e-6);
-  CHECK(max_abs(sincos_encoding(x, 10, true), ref.at("pe10")) < 1e-6);
-  CHECK(max_abs(direction_encoding(d), ref.at("gamma")) < 1e-6);
+  CHECK(max_abs(kernels::sincos_encoding(x, 10, true), ref.at("pe10")) < 1e-6);
+  CHECK(max_abs(kernels::direction_encoding(d), ref.at("gamma")) < 1e-6);
   // The fused variant reproduces torch.addcmul (FMA) exactly as the reference evaluates it, which
   // differs from the separately rounded values at high frequencies.
-  CHECK(max_abs(sincos_encoding(x, 32, false, true), ref.at("pe32_addcmul")) < 1e-6);
+  CHECK(max_abs(kernels::sincos_encoding(x, 32, false, true), ref.at("pe32_addcmul")) < 1e-6);
   CHECK(max_abs(ref.at("pe32"), ref.at("pe32_addcmul")) > 0.1);
   // Low frequencies are the same either way: layout check [sin x, sin y, sin z, cos x, ...].
   CHECK(pe32[0][0].item<double>() == Approx(std::sin(M_PI * x[0][0].item<double>())).margin(1e-6));
@@ -59,7 +56,6 @@ TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v",
   const auto xs = torch::randn({n, 3}) * 0.3;
   DPaRFConfig cfg;
   cfg.nk = 7;
-  DPaRF dparf(cfg);
   test::PythonReference py("formulas_dparf");
   py.add("xs", xs);
   py.add("origins", frames.origins);
@@ -68,24 +64,24 @@ TEST_CASE("DPaRF: nearest fields, distance softmax, local coordinates and h_v",
   py.add("nk", torch::tensor({7.0f}));
   py.add("temperature", torch::tensor({0.5f}));
   const auto ref = py.run("dparf");
-  const auto q = dparf.query(frames, xs);
+  auto q = kernels::nearest_fields(xs, frames.origins, frames.rotations,
+                                   {7, 0.5, /*local=*/true, cfg.pe_freqs, true});
   CHECK(torch::equal(q.index, ref.at("index")));
   CHECK(max_abs(q.weight, ref.at("weights")) < 1e-6);
-  const auto fields = kernels::nearest_fields(xs, frames.origins, frames.rotations,
-                                              {7, 0.5, /*local=*/true, cfg.pe_freqs, true});
-  CHECK(max_abs(fields.local, ref.at("local")) < 1e-5);
+  CHECK(max_abs(q.local, ref.at("local")) < 1e-5);
+  const auto coords = kernels::weighted_codes(q);
   // h_v = sum_k w_k [T_v(k); g_k]: the tokens weighted here, sum_k w_k g_k from the query.
   // 1-ulp differences of l (float32) are amplified by f_9 = 512 pi in the encoding.
   const auto T_k = tokens.index_select(1, q.index.flatten()).view({V, n, cfg.nk, C});
   const auto h_tokens = (q.weight.view({1, n, cfg.nk, 1}) * T_k).sum(2).permute({1, 0, 2});
-  const auto h = torch::cat({h_tokens, q.coords.unsqueeze(1).expand({n, V, -1})}, 2);
+  const auto h = torch::cat({h_tokens, coords.unsqueeze(1).expand({n, V, -1})}, 2);
   CHECK(max_abs(h, ref.at("h")) < 1e-4);
 }
 
 TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim=1)",
           "[model][formulas]") {
   torch::manual_seed(2);
-  TransHuman model{ModelConfig{}};  // the paper's fusion; its plan applies FDI's layers
+  TransHuman model{ModelConfig{}};  // the paper's fusion
   auto& fdi = model->fdi;
   const int64_t n = 64, V = 3;
   const auto s = torch::relu(torch::randn({n, V, 256})), a = torch::relu(torch::randn({n, V, 256}));
@@ -107,10 +103,7 @@ TEST_CASE("FDI: attention over the key views, as the reference's bmm/softmax(dim
   const auto att = kernels::view_attention_weights(fdi->key1(s), fdi->key0(a));
   CHECK(max_abs(att, ref.at("attention")) < 1e-6);
   CHECK(torch::allclose(att.sum(2), torch::ones({n, V})));  // normalised over the key views
-  const Plan plan(*model, PlanTarget{});
-  FrameCache folded;
-  folded.network = fold_weights(*model->fdi, *model->heads);
-  CHECK(max_abs(plan.fuse(folded, s, a), ref.at("e")) < 1e-4);
+  CHECK(max_abs(fdi->forward(fdi->fold(), s, a, Products{}), ref.at("e")) < 1e-4);
 }
 
 TEST_CASE("compositing: 1e10 last interval, 1e-10 transmittance term, black background",
@@ -165,7 +158,7 @@ TEST_CASE("encoder: ResNet-18 trunk, pixel feature and reduction equal torchvisi
   CHECK(max_abs(out.levels[0], ref.at("l0")) < 1e-4);
   CHECK(max_abs(out.levels[1], ref.at("l1")) < 1e-4);
   CHECK(max_abs(out.levels[2], ref.at("l2")) < 1e-4);
-  const auto pixel = pixel_feature_map(*enc, out.levels, images);
+  const auto pixel = test::pixel_feature_map(out.levels, images, enc->upsample_color);
   CHECK(max_abs(pixel, ref.at("pixel")) < 1e-4);
   CHECK(max_abs(torch::conv2d(pixel, enc->reduction_layer->weight, enc->reduction_layer->bias),
                 ref.at("holder")) < 1e-4);

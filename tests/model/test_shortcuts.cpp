@@ -1,5 +1,6 @@
 // The exact shortcuts of METHOD 9 and the kernels that read them, against the direct computation
-// they replace (the plain pass's pieces, model/network.hpp) and against their LibTorch forms.
+// they replace (grid_sample of the upsampled maps, the layers on p_v) and against their LibTorch
+// forms.
 #include <torch/torch.h>
 
 #include <array>
@@ -8,10 +9,9 @@
 #include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
 #include "model/kernels/forms.hpp"
+#include "model/kernels/nearest_fields.hpp"
 #include "model/kernels/view_attention.hpp"
-#include "model/network.hpp"
-#include "model/sampling.hpp"
-#include "model/shortcuts.hpp"
+#include "model/pixels.hpp"
 #include "model/transhuman.hpp"
 
 using namespace th;
@@ -19,6 +19,7 @@ using namespace th::model;
 
 namespace F = torch::nn::functional;
 
+using test::grid_sample_pixels;
 using test::max_abs;
 
 namespace {
@@ -51,16 +52,21 @@ TEST_CASE("composed sampling equals grid_sample of the bilinearly upsampled map"
     const auto direct = grid_sample_pixels(up, uv);  // (n, V, C)
     const auto flat = uv.reshape({-1, 2});
     const auto view = torch::arange(V).repeat({n});
-    const auto taps = upsampled_bilinear_taps(flat, view, h, w, H, W);
+    const kernels::TapLayout layout{{{h, w}}, {0}, H, W};
+    const auto libtorch_taps = [&](const torch::Tensor& at) {
+      kernels::LibTorchForms libtorch_forms;
+      return kernels::level_taps(at, view, layout);
+    };
+    const auto taps = libtorch_taps(flat);
     CHECK(taps.index.size(1) == (h == H && w == W ? 4 : 9));
     const auto fast = kernels::weighted_gather(to_table(map), taps).view({n, V, C});
     CHECK(max_abs(direct, fast) < 1e-12);
-    // The one-pass CPU taps give the same taps as the tensor formulation.
-    const auto cpu = kernels::level_taps(flat, view, {{{h, w}}, {0}, H, W});
+    // The one-pass CPU taps give the same taps as the LibTorch form.
+    const auto cpu = kernels::level_taps(flat, view, layout);
     CHECK(torch::equal(cpu.index, taps.index));
     CHECK(torch::equal(cpu.weight, taps.weight));
-    const auto cpu32 = kernels::level_taps(flat.to(torch::kFloat), view, {{{h, w}}, {0}, H, W});
-    const auto ref32 = upsampled_bilinear_taps(flat.to(torch::kFloat), view, h, w, H, W);
+    const auto cpu32 = kernels::level_taps(flat.to(torch::kFloat), view, layout);
+    const auto ref32 = libtorch_taps(flat.to(torch::kFloat));
     CHECK(torch::equal(cpu32.index, ref32.index));
     CHECK(torch::equal(cpu32.weight, ref32.weight));
   }
@@ -91,7 +97,7 @@ TEST_CASE("pixel readouts equal the linear layer on the materialised pixel featu
     const int64_t V = 3, S = 32, n = 100;
     const auto images = torch::rand({V, 3, S, S});
     const auto views = enc->forward(images);
-    const auto pf = pixel_feature_map(*enc, views.levels, views.images);
+    const auto pf = test::pixel_feature_map(views.levels, views.images, enc->upsample_color);
     REQUIRE(pf.size(1) == enc->pixel_channels());
     torch::nn::Linear layer(enc->pixel_channels(), 40);
     const auto uv = random_uv(n, V, S, S);
@@ -144,23 +150,24 @@ TEST_CASE("the one-pass DPaRF query equals its LibTorch form", "[model][shortcut
   TokenFrames frames{torch::randn({nt, 3}) * 0.3,
                      torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
   const auto xs = torch::randn({n, 3}) * 0.4;
-  for (const Coordinate coordinate :
-       {Coordinate::relative, Coordinate::absolute, Coordinate::none}) {
+  for (const Coordinate coordinate : {Coordinate::relative, Coordinate::none}) {
     for (int nk : {1, 4, 7}) {
-      DPaRFConfig cfg;
-      cfg.coordinate = coordinate;
-      cfg.nk = nk;
-      DPaRF dparf(cfg);
-      const auto a = dparf.query(frames, xs);
-      const auto b = [&] {
+      const bool local = coordinate == Coordinate::relative;
+      const kernels::FieldQueryOptions options{nk, 0.5, local, 10, true};
+      auto a = kernels::nearest_fields(xs, frames.origins, frames.rotations, options);
+      auto b = [&] {
         kernels::LibTorchForms libtorch_forms;
-        return dparf.query(frames, xs);
+        return kernels::nearest_fields(xs, frames.origins, frames.rotations, options);
       }();
       INFO(config::name_of(coordinate) << " nk " << nk);
       CHECK(torch::equal(a.index, b.index));
       CHECK(max_abs(a.weight, b.weight) < 1e-6);
-      CHECK(a.coords.defined() == b.coords.defined());
-      if (a.coords.defined()) CHECK(max_abs(a.coords, b.coords) < 1e-5);
+      CHECK(a.local.defined() == local);
+      CHECK(b.local.defined() == local);
+      if (local) {
+        CHECK(max_abs(a.local, b.local) < 1e-6);
+        CHECK(max_abs(kernels::weighted_codes(a), kernels::weighted_codes(b)) < 1e-5);
+      }
     }
   }
 }
@@ -260,7 +267,7 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   TransHuman model(c);
   model->eval();
   torch::NoGradGuard ng;
-  // With a culling distance the inference plan makes windows; without one, the level tables.
+  // With a culling distance inference on CPU makes windows; without one, the level tables.
   const auto a = model->prepare(frame.inputs, 0.1), b = model->prepare(frame.inputs, 0);
   REQUIRE(std::holds_alternative<WindowReadouts>(a.pixels));
   REQUIRE(std::holds_alternative<PixelReadouts>(b.pixels));

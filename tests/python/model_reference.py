@@ -1,6 +1,6 @@
 """Independent reference values for the network and renderer formulas (METHOD 3, 4).
 
-Usage: model_reference.py <command> <dir>
+Usage: model_reference.py <command> <dir> [<dir> ...]
 Inputs and outputs are raw little-endian arrays listed in <dir>/manifest.txt (inputs, written
 by the C++ test) and <dir>/out_manifest.txt (outputs), one line "name dtype d0 d1 ...".
 Each formula is written here from docs/METHOD.md (numpy, or the reference code's torch idiom where the
@@ -305,8 +305,207 @@ def cmd_render(a):
             "kept": near_body.view(len(o), S).long().numpy()}
 
 
+
+def cmd_network(a):
+    """METHOD 3 as a whole, in PyTorch, for one frame and its points in the ablation that the cfg_*
+    flags describe (the paper's model, w/o a, w/o h, w/o RGB, SPC, w/o TransHE, the coordinate and
+    grouping variants, the PE roundings, BatchNorm's statistics): raw [rgb, sigma] per point at
+    inference, and in training mode the parameters' gradients of sum(sigma w_3) + sum(rgb w_rgb
+    coloured<K>) for each mask coloured<K> given (outputs <K>G_<name>). Only the weights (P_<name>,
+    B_<name>: the C++ parameter and buffer names), the frame and the points come from the C++
+    side."""
+    import torch
+    import torch.nn.functional as F
+
+    t = {k: torch.from_numpy(v.copy()) for k, v in a.items()}
+    cfg = {k[4:]: float(v.reshape(-1)[0]) for k, v in a.items() if k.startswith("cfg_")}
+    params = {k[2:]: v for k, v in t.items() if k.startswith("P_")}
+    buffers = {k[2:]: v for k, v in t.items() if k.startswith("B_")}
+    images, vis, labels = t["ref_images"], t["visibility"].float(), t["labels"]
+    V, _, H, W = images.shape
+    K, R, T = t["K"], t["R"], t["T"].reshape(-1, 3)
+    Rh, Th, A = t["Rh"], t["Th"].reshape(3), t["A"]
+    vertices, pts, dirs = t["vertices"], t["pts"], t["dirs"]
+
+    def pe(x, num_freqs, fused, include_input):
+        if fused:
+            return reference_pe(x, num_freqs, include_input)
+        freqs = torch.repeat_interleave(math.pi * 2.0 ** torch.arange(0, num_freqs), 2).view(1, -1, 1).float()
+        phases = torch.zeros(2 * num_freqs)
+        phases[1::2] = math.pi * 0.5
+        emb = torch.sin(x.unsqueeze(1) * freqs + phases.view(1, -1, 1)).reshape(x.shape[0], -1)
+        return torch.cat([x, emb], -1) if include_input else emb
+
+    def project(x):  # (N, 3) world -> (N, V, 2) pixels
+        cam = torch.einsum("vij,nj->nvi", R, x) + T[None]
+        img = torch.einsum("vij,nvj->nvi", K, cam)
+        return img[..., :2] / img[..., 2:]
+
+    def sample(feat, uv):  # (V, C, H, W) at (N, V, 2) -> (N, V, C)
+        grid = torch.stack([uv[..., 0] * 2 / (W - 1) - 1, uv[..., 1] * 2 / (H - 1) - 1], -1)
+        out = F.grid_sample(feat, grid.permute(1, 0, 2)[:, None], mode="bilinear", padding_mode="border",
+                            align_corners=True)
+        return out[:, :, 0].permute(2, 0, 1)
+
+    def forward(P, training):
+        def lin(name, x):
+            return F.linear(x, P[name + ".weight"], P.get(name + ".bias"))
+
+        def conv(name, x, stride=1, padding=0):
+            return F.conv2d(x, P[name + ".weight"], P.get(name + ".bias"), stride, padding)
+
+        def bn(name, x):  # batch statistics in training, and at inference unless running ones
+            batch = training or cfg["batch_stats"] > 0
+            return F.batch_norm(x, None if batch else buffers[name + ".running_mean"],
+                                None if batch else buffers[name + ".running_var"], P[name + ".weight"],
+                                P[name + ".bias"], training=batch, momentum=0.1, eps=1e-5)
+
+        def block(name, x, stride):
+            y = F.relu(bn(name + ".bn1", conv(name + ".conv1", x, stride, 1)))
+            y = bn(name + ".bn2", conv(name + ".conv2", y, 1, 1))
+            if name + ".downsample.0.weight" in P:
+                x = bn(name + ".downsample.1", conv(name + ".downsample.0", x, stride))
+            return F.relu(y + x)
+
+        # 3.1: ResNet-18 to layer2, the levels upsampled, the raw-RGB channels.
+        m = "encoder.model."
+        l0 = F.relu(bn(m + "bn1", conv(m + "conv1", images, 2, 3)))
+        l1 = block(m + "layer1.1", block(m + "layer1.0", F.max_pool2d(l0, 3, 2, 1), 1), 1)
+        l2 = block(m + "layer2.1", block(m + "layer2.0", l1, 2), 1)
+        p_v = [F.interpolate(l, (H, W), mode="bilinear", align_corners=True) for l in (l0, l1, l2)]
+        if "encoder.upsample_color.weight" in P:
+            p_v.append(conv("encoder.upsample_color", images))
+        p_v = torch.cat(p_v, 1)
+
+        xs = (pts - Th) @ Rh  # SMPL frame
+        xs_vertices = (vertices - Th) @ Rh
+        s = None
+        if cfg["human"] > 0:
+            # 3.1 painting: F_v (V, Nv, 192), zero where a vertex is invisible.
+            F_v = sample(conv("encoder.reduction_layer", p_v), project(vertices)).permute(1, 0, 2) * vis[..., None]
+            if cfg["spc"] > 0:
+                s = spc(P, lin, F_v, xs_vertices, xs)
+            else:
+                s = token_fields(P, lin, F_v, xs_vertices, xs)
+
+        # 3.4 FDI.
+        def attention(q, k):  # (N, V, V): softmax over the key views
+            return F.softmax(q @ k.transpose(1, 2) / math.sqrt(q.shape[2]), 2)
+
+        if cfg["appearance"] > 0:
+            p = sample(p_v, project(pts))
+            app = F.relu(lin("fdi.alpha_res_0", p))
+            k, u = lin("fdi.key0", app), lin("fdi.value0", app)
+            if s is not None:
+                o = lin("fdi.value1", s) + attention(lin("fdi.key1", s), k) @ u
+            else:
+                o = u + attention(k, k) @ u
+        else:
+            o = lin("fdi.value1", s)
+        e = F.relu(lin("fdi.fc_2", F.relu(lin("fdi.fc_1", o))))
+        # 3.4 the heads.
+        sigma = lin("heads.alpha_fc", F.relu(lin("heads.fc_3", e.mean(1))))[:, 0]
+        d = dirs / dirs.norm(dim=1, keepdim=True)
+        gam = torch.cat([d] + [f(d * s_) for s_ in (1.0, 2.0, 4.0, 8.0) for f in (torch.sin, torch.cos)], 1)
+        c = lin("heads.feature_fc", e)
+        if cfg["appearance"] > 0:
+            c = c + lin("heads.rgb_res_0", p)
+        c = F.relu(lin("heads.view_fc", torch.cat([c, gam[:, None].expand(-1, V, -1)], 2)))
+        if cfg["appearance"] > 0:
+            c = c + lin("heads.rgb_res_1", p)
+        rgb = lin("heads.rgb_fc", F.relu(lin("heads.fc_4", c.mean(1))))
+        return rgb, sigma
+
+    def token_fields(P, lin, F_v, xs_vertices, xs):
+        # 3.2 TransHE: cluster means (clusters without vertices have no token), positions, ViT.
+        nt = int(cfg["num_tokens"])
+        member = F.one_hot(labels, nt)
+        keep = member.sum(0).nonzero().flatten()
+
+        def mean(values, weights=None):
+            m_ = member.to(values.dtype)
+            w = torch.ones(values.shape[-2], dtype=values.dtype) if weights is None else weights.to(values.dtype)
+            sums = m_.t() @ (values * w[..., None])
+            counts = (w @ m_)[..., None]
+            return (sums / counts.clamp_min(1)).index_select(-2, keep)
+
+        tokens = mean(F_v, vis if cfg["mean_over_visible"] > 0 else None)
+        if cfg["transhe"] > 0:
+            body = xs_vertices if cfg["position_observation"] > 0 else t["canonical"]
+            sc = cfg["pe_scale"]
+            positions = ((((mean(body.double()) + sc) / (2 * sc)) - 0.5) * 2).float()
+            x = tokens + pe(positions, int(cfg["transhe_pe_freqs"]), cfg["transhe_fused"] > 0, False)[None]
+            depth = len({k.split(".")[3] for k in P if k.startswith("human.ViT.blocks.")})
+            heads, C = int(cfg["heads"]), x.shape[-1]
+            B, N = x.shape[:2]
+            for i in range(depth):
+                b = f"human.ViT.blocks.{i}."
+                y = F.layer_norm(x, (C,), P[b + "norm1.weight"], P[b + "norm1.bias"], eps=1e-6)
+                qkv = lin(b + "attn.qkv", y).reshape(B, N, 3, heads, C // heads).permute(2, 0, 3, 1, 4)
+                att = ((qkv[0] @ qkv[1].transpose(-2, -1)) / math.sqrt(C // heads)).softmax(-1)
+                x = x + lin(b + "attn.proj", (att @ qkv[2]).transpose(1, 2).reshape(B, N, C))
+                y = F.layer_norm(x, (C,), P[b + "norm2.weight"], P[b + "norm2.bias"], eps=1e-6)
+                x = x + lin(b + "mlp.fc2", F.gelu(lin(b + "mlp.fc1", y)))
+            tokens = F.layer_norm(x, (C,), P["human.ViT.norm.weight"], P["human.ViT.norm.bias"], eps=1e-6)
+        # 3.3 DPaRF: the Nk nearest token frames (Oc, Rc), softmax(-distance / T), local coordinates.
+        Oc, Rc = mean(xs_vertices), mean(A.reshape(-1, 9)).view(-1, 3, 3)
+        N, nk = xs.shape[0], int(cfg["nk"])
+        knn = ((xs[:, None] - Oc[None]) ** 2).sum(2).topk(nk, 1, largest=False, sorted=True)[1]
+        diff = xs[:, None] - Oc[knn]  # (N, Nk, 3)
+        w = F.softmax(-diff.norm(dim=-1) / cfg["temperature"], 1)
+        freqs, fused = int(cfg["dparf_pe_freqs"]), cfg["dparf_fused"] > 0
+        g = None
+        if cfg["coordinate"] == 0:  # relative: l_k = Rc(k)^T (xs - Oc(k))
+            Rk = Rc[knn]
+            local = diff[..., 0:1] * Rk[..., 0, :] + diff[..., 1:2] * Rk[..., 1, :] + diff[..., 2:3] * Rk[..., 2, :]
+            g = pe(local.reshape(-1, 3), freqs, fused, True).view(N, nk, -1)
+        elif cfg["coordinate"] == 1:  # absolute: the point's own
+            g = pe(xs, freqs, fused, True)[:, None].expand(N, nk, -1)
+        field = tokens[:, knn].permute(1, 0, 2, 3)  # (N, V, Nk, C)
+        if g is not None:
+            field = torch.cat([field, g[:, None].expand(N, V, nk, -1)], 3)
+        return F.relu(lin("human.fc_0", (w[:, None, :, None] * field).sum(2)))
+
+    def spc(P, lin, F_v, xs_vertices, xs):
+        # The SPC baseline: embedded painted features averaged into voxels over the posed body,
+        # two 3D convolutions, read trilinearly (zero outside the grid).
+        voxel = cfg["voxel_size"]
+        lo = xs_vertices.min(0)[0] - 2 * voxel
+        hi = xs_vertices.max(0)[0] + 2 * voxel
+        dims = ((hi - lo) / voxel).ceil().long() + 1
+        nx, ny, nz = dims.tolist()
+        cell = ((xs_vertices - lo) / voxel).round().long()
+        vox = (cell[:, 2] * ny + cell[:, 1]) * nx + cell[:, 0]
+        emb = lin("human.embed", F_v)
+        C = emb.shape[2]
+        sums = torch.zeros(V, nz * ny * nx, C).index_add(1, vox, emb)
+        counts = torch.zeros(nz * ny * nx).index_add(0, vox, torch.ones(len(vox)))
+        grid = (sums / counts.clamp_min(1)[None, :, None]).permute(0, 2, 1).reshape(V, C, nz, ny, nx)
+        for i in (0, 2):
+            grid = F.relu(F.conv3d(grid, P[f"human.conv.{i}.weight"], P[f"human.conv.{i}.bias"], padding=1))
+        at = ((xs - lo) / ((dims - 1).float() * voxel)) * 2 - 1
+        f = F.grid_sample(grid, at.view(1, 1, 1, -1, 3).expand(V, 1, 1, len(xs), 3), mode="bilinear",
+                          padding_mode="zeros", align_corners=True)
+        return F.relu(lin("human.fc_0", f.view(V, C, -1).permute(2, 0, 1)))
+
+    with torch.no_grad():
+        rgb, sigma = forward(params, False)
+    out = {"raw": torch.cat([rgb, sigma[:, None]], 1).numpy()}
+    leaves = {k: v.clone().requires_grad_(True) for k, v in params.items()}
+    rgb, sigma = forward(leaves, True)
+    w, names = t["w"], sorted(leaves)
+    masks = sorted(k for k in t if k.startswith("coloured"))  # one gradient set per mask
+    for i, mask in enumerate(masks):
+        loss = (sigma * w[:, 3]).sum() + (rgb * w[:, :3] * t[mask]).sum()
+        grads = torch.autograd.grad(loss, [leaves[n] for n in names], allow_unused=True,
+                                    retain_graph=i + 1 < len(masks))
+        for name, g in zip(names, grads):
+            if g is not None:
+                out[mask[len("coloured"):] + "G_" + name] = g.numpy()
+    return out
+
+
 if __name__ == "__main__":
-    command, directory = sys.argv[1], sys.argv[2]
-    DIR = directory
-    arrays = read_all(directory)
-    write_all(directory, globals()["cmd_" + command](arrays))
+    command = sys.argv[1]
+    for DIR in sys.argv[2:]:  # one or more inputs' folders, each answered in its own
+        write_all(DIR, globals()["cmd_" + command](read_all(DIR)))

@@ -9,7 +9,6 @@
 
 #include "model/kernels/encoding.hpp"
 #include "model/kernels/forms.hpp"
-#include "model/positional_encoding.hpp"
 
 namespace th::model::kernels {
 namespace {
@@ -123,7 +122,7 @@ void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin
 }
 
 // The same query in LibTorch operations (other devices, gradients with respect to the points):
-// exact squared distances to every origin, as the plain pass computes them. (Not the expanded
+// exact squared distances to every origin, as the reference computes them. (Not the expanded
 // |x|^2 - 2 x.O + |O|^2: its rounding depends on the product's blocking, so a near tie could pick
 // other fields in a training recomputation than in the pass it recomputes.)
 NearestFields nearest_fields_tensors(const torch::Tensor& xs, const torch::Tensor& O,

@@ -1,23 +1,13 @@
-#include "model/shortcuts.hpp"
+#include "model/pixels.hpp"
 
 #include "geometry/camera.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
 #include "model/heads.hpp"
+#include "model/kernels/forms.hpp"
 #include "render/chunks.hpp"
 
 namespace th::model {
-
-torch::Tensor token_table(const torch::Tensor& tokens, const torch::nn::Linear& fc_0) {
-  const auto C = tokens.size(2);
-  const auto w_tok = fc_0->weight.narrow(1, 0, C);
-  const auto table = torch::matmul(tokens, w_tok.t()) + fc_0->bias;  // (V, Nt, 256)
-  return table.permute({1, 0, 2}).reshape({table.size(1), -1});
-}
-
-FoldedWeights fold_weights(const FDIImpl& fdi, const HeadsImpl& heads) {
-  return {fdi.fold(), heads.fold()};
-}
 
 namespace {
 
@@ -37,30 +27,65 @@ WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight,
 
 }  // namespace
 
-PixelReadouts make_pixel_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
-                                  const FDIImpl& fdi, const HeadsFolded& heads) {
-  PixelReadouts px;
-  px.geometry = enc.geometry;
-  px.alpha = encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias);
-  px.color = encoder.make_readout(enc, heads.readout_weight, heads.readout_bias);
-  px.color.image_table = px.alpha.image_table;  // one copy of the raw images
+PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
+                          const HeadsFolded& heads, const FrameGeometry& geometry,
+                          const torch::Tensor& vertices, double cull_distance) {
+  if (!fdi.alpha_res_0) return NoPixels{};
+  const auto& alpha = *fdi.alpha_res_0;
+  if (torch::GradMode::is_enabled() || !kernels::cpu_kernels(enc.images.device()) ||
+      cull_distance <= 0) {
+    PixelReadouts px;
+    px.geometry = enc.geometry;
+    px.alpha = encoder.make_readout(enc, alpha.weight, alpha.bias);
+    px.color = encoder.make_readout(enc, heads.readout_weight, heads.readout_bias);
+    px.color.image_table = px.alpha.image_table;  // one copy of the raw images
+    return px;
+  }
+  WindowReadouts px;
+  px.windows = body_windows(geometry, vertices, cull_distance, enc.geometry);
+  const auto [uv, view] = px.windows.pixels(enc.images.options());
+  // One readout at a time, so that a single level table exists at any moment.
+  px.alpha = to_window(encoder.make_readout(enc, alpha.weight, alpha.bias), alpha.weight,
+                       alpha.bias, px.windows, uv, view, enc.geometry);
+  px.color =
+      to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias),
+                heads.readout_weight, heads.readout_bias, px.windows, uv, view, enc.geometry);
+  px.enc = enc;  // for points outside the windows
   return px;
 }
 
-WindowReadouts make_window_readouts(const EncoderImpl& encoder, const EncodedViews& enc,
-                                    const FDIImpl& fdi, const HeadsFolded& heads,
-                                    const PixelWindows& windows) {
-  WindowReadouts px;
-  const auto [uv, view] = windows.pixels(enc.images.options());
-  // One readout at a time, so that a single level table exists at any moment.
-  px.alpha =
-      to_window(encoder.make_readout(enc, fdi.alpha_res_0->weight, fdi.alpha_res_0->bias),
-                fdi.alpha_res_0->weight, fdi.alpha_res_0->bias, windows, uv, view, enc.geometry);
-  px.color = to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias),
-                       heads.readout_weight, heads.readout_bias, windows, uv, view, enc.geometry);
-  px.windows = windows;
-  px.enc = enc;  // for points outside the windows
-  return px;
+namespace {
+
+torch::Tensor read_windows(const WindowReadouts& px, const WindowReadout& readout,
+                           const EncoderImpl& encoder, const torch::Tensor& uv) {
+  const auto [flat, view] = PixelGeometry::point_view_rows(uv);
+  const auto& g = px.enc.geometry;
+  const auto [taps, inside] = px.windows.taps(flat, view, g.height, g.width);
+  auto out = kernels::weighted_gather(readout.table, taps);
+  if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
+    const auto idx = (~inside).nonzero().flatten();
+    const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
+    const auto p =
+        encoder.sample_pixel_features(px.enc, g.stacked_level_taps(f, v), g.image_taps(f, v));
+    out.index_copy_(0, idx, torch::nn::functional::linear(p, readout.weight, readout.layer_bias));
+  }
+  return out.view({uv.size(0), uv.size(1), -1});
+}
+
+}  // namespace
+
+torch::Tensor sample_pixels(const PixelStage& stage, const EncoderImpl& encoder,
+                            const torch::Tensor& uv, PixelLayer layer) {
+  const bool alpha = layer == PixelLayer::appearance;
+  if (const auto* px = std::get_if<PixelReadouts>(&stage)) {
+    const auto [flat, view] = PixelGeometry::point_view_rows(uv);
+    return (alpha ? px->alpha : px->color)
+        .sample(px->geometry.stacked_level_taps(flat, view), px->geometry.image_taps(flat, view))
+        .view({uv.size(0), uv.size(1), -1});
+  }
+  if (const auto* px = std::get_if<WindowReadouts>(&stage))
+    return read_windows(*px, alpha ? px->alpha : px->color, encoder, uv);
+  return {};  // NoPixels
 }
 
 PixelWindows body_windows(const FrameGeometry& geo, const torch::Tensor& vertices, double distance,

@@ -1,6 +1,5 @@
-// The plan (model/plan.hpp): built once per mode, device and precision, picked when a frame is
-// prepared, kept by the frame's chunks; its stages' timing hook; the guard that puts the
-// kernels' LibTorch forms in place of the CPU kernels.
+// Where each operation picks its form (model/kernels/forms.hpp): the pixel stage by grad mode and
+// device when a frame is prepared, the kernels by device; the stages' timing hook.
 #include <torch/torch.h>
 
 #include <catch2/catch.hpp>
@@ -16,29 +15,23 @@ using namespace th::model;
 
 using test::max_abs;
 
-TEST_CASE("a plan per mode: prepare picks it once and the frame's chunks keep it",
-          "[model][plan]") {
+TEST_CASE("the pixel stage takes its form when the frame is prepared, and the frame keeps it",
+          "[model][forms]") {
   const auto frame = test::synthetic_frame();
   torch::manual_seed(5);
   TransHuman model(test::tiny_model_config());
   test::center_density(*model, frame);
-  // The inference plan reads readout windows on CPU; the training plan the full readouts.
-  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
-  CHECK(std::string(model->plan(true, torch::kCPU).pixel_form()) == "pixel readouts");
-  CHECK(&model->plan(false, torch::kCPU) == &model->plan(false, torch::kCPU));  // built once
-
+  // Inference on CPU reads readout windows; under autograd (training) the full readouts.
   FrameCache inference;
   {
     torch::NoGradGuard no_grad;
     inference = model->prepare(frame.inputs, 0.1);
   }
   const auto training = model->prepare(frame.inputs, 0.1);
-  CHECK_FALSE(inference.training);
   CHECK(std::holds_alternative<WindowReadouts>(inference.pixels));
-  CHECK(training.training);
   CHECK(std::holds_alternative<PixelReadouts>(training.pixels));
 
-  // A frame keeps its plan whatever the mode of the call that evaluates it: the inference frame
+  // A frame keeps its form whatever the mode of the call that evaluates it: the inference frame
   // evaluated while autograd records reads its windows, and equals the training frame.
   torch::manual_seed(6);
   const auto pts = frame.inputs.vertices.narrow(0, 0, 48) + 0.03 * torch::randn({48, 3});
@@ -50,16 +43,9 @@ TEST_CASE("a plan per mode: prepare picks it once and the frame's chunks keep it
     b = model->forward(training, pts, dirs);
   }
   CHECK(max_abs(a, b) < 1e-5 * (1 + b.abs().max().item<double>()));
-
-  // New products build new plans: the next prepared frame runs in them.
-  Products bf16;
-  bf16.precision = Precision::bf16;
-  model->set_products(bf16);
-  CHECK(model->plan(false, torch::kCPU).target().products.bf16());
-  CHECK(model->plan(true, torch::kCPU).target().products.bf16());
 }
 
-TEST_CASE("profiling: each stage's time, the method's results unchanged", "[model][plan]") {
+TEST_CASE("profiling: each stage's time, the method's results unchanged", "[model][forms]") {
   const auto frame = test::synthetic_frame();
   torch::manual_seed(7);
   TransHuman model(test::tiny_model_config());
@@ -88,12 +74,14 @@ TEST_CASE("profiling: each stage's time, the method's results unchanged", "[mode
   CHECK(profile.seconds == before);
 }
 
-TEST_CASE("LibTorch forms: the CPU kernels step aside while the guard lives, and plans follow",
-          "[model][plan]") {
+TEST_CASE("LibTorch forms: the CPU kernels step aside while the guard lives", "[model][forms]") {
+  const auto frame = test::synthetic_frame();
   torch::manual_seed(5);
   TransHuman model(test::tiny_model_config());
+  torch::NoGradGuard no_grad;
+  auto pixels = [&] { return model->prepare(frame.inputs, 0.1).pixels; };
   CHECK(kernels::cpu_kernels(torch::kCPU));
-  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
+  CHECK(std::holds_alternative<WindowReadouts>(pixels()));
   {
     kernels::LibTorchForms outer;
     CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));
@@ -102,12 +90,10 @@ TEST_CASE("LibTorch forms: the CPU kernels step aside while the guard lives, and
       CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));
     }
     CHECK_FALSE(kernels::cpu_kernels(torch::kCPU));  // the inner guard restores the outer's
-    // The plan built before the guard is not reused: readout windows are a CPU kernel's form.
-    CHECK_FALSE(model->plan(false, torch::kCPU).target().cpu_kernels);
-    CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "pixel readouts");
+    // Readout windows are a CPU kernel's form: the LibTorch forms read the level readouts.
+    CHECK(std::holds_alternative<PixelReadouts>(pixels()));
   }
   CHECK(kernels::cpu_kernels(torch::kCPU));
-  CHECK(model->plan(false, torch::kCPU).target().cpu_kernels);
-  CHECK(std::string(model->plan(false, torch::kCPU).pixel_form()) == "readout windows");
+  CHECK(std::holds_alternative<WindowReadouts>(pixels()));
   CHECK_FALSE(kernels::cpu_kernels(torch::Device(torch::kCUDA, 0)));  // no kernel of ours there
 }
