@@ -71,387 +71,247 @@ TH_CHOICE_NAMES(Fp32Products, {"auto", Fp32Products::automatic}, {"onednn", Fp32
                 {"blas", Fp32Products::blas})
 #undef TH_CHOICE_NAMES
 
-// ---- the sections: each field's type and default; its key, accepted values and description
-// are in the section's visit_fields below (config_io.hpp), written once --------------------
-struct PatchConfig {
-  int count = 6;
-  int size = 20;
-  double body_prob = 0.8;
-};
+// ---- the sections: one line per key with its type, default, accepted values and description
+// (config_io.hpp) ------------------------------------------------------------------------------
 
-struct JitterConfig {
-  bool enabled = true;
-  std::vector<double> brightness{0.2, 2.0};
-  std::vector<double> contrast{0.3, 2.0};
-  std::vector<double> saturation{0.2, 2.0};
-  std::vector<double> hue{-0.5, 0.5};
-};
-
-struct DataConfig {
-  DatasetKind dataset = DatasetKind::synthetic;
-  std::string root = "data/synthetic";
-  DataLayout layout = DataLayout::automatic;
-  int person_id = -1;
-  std::string split_file = "data_splits/synthetic.yaml";
-  std::vector<std::string> reference_views;
-  int num_reference_views = 3;
-  std::string train_setting = "training";
-  std::string test_setting = "identity";
-  std::string smpl_model = "";
-  double ratio = 0.5;
-  VisibilitySource visibility = VisibilitySource::rasterize;
-  std::string visibility_root = "";
-  MissingVisibility visibility_missing = MissingVisibility::error;
-  double box_padding = 0.05;
-  CalibrationCheck calibration_check = CalibrationCheck::error;
-  BorderBand border_band = BorderBand::distorted;
-  PatchConfig patch;
-  JitterConfig jitter;
-  int workers = 2;
-  int prefetch = 4;
-};
-
-struct EncoderConfig {
-  std::string pretrained = "";
-  BatchNormStats batchnorm = BatchNormStats::batch;
-};
-
-// model.grouping.kmeans_file's value that imports a reference checkpoint with token groups computed
-// here instead of the reference's own (METHOD 8): its renders then differ from the reference's.
-inline constexpr const char* kKMeansCompute = "compute";
-
-struct GroupingConfig {
-  GroupingKind kind = GroupingKind::canonical_kmeans;
-  int num_tokens = 300;
-  std::string kmeans_file = "";
-  std::string cache_dir = "cache";
-  int64_t seed = 0;
-  MeanOver mean_over = MeanOver::all;
-};
-
-struct TransHEConfig {
-  bool enabled = true;
-  TokenPosition position = TokenPosition::canonical;
-  int dim = 192;
-  int depth = 12;
-  int heads = 3;
-  int mlp_dim = 768;
-  int pe_freqs = 32;
-  double pe_scale = 1.5;
-  PeRounding pe_rounding = PeRounding::fused;
-};
-
-struct DPaRFConfig {
-  int nk = 7;
-  Coordinate coordinate = Coordinate::relative;
-  double softmax_temperature = 0.5;
-  int pe_freqs = 10;
-  PeRounding pe_rounding = PeRounding::fused;
-};
-
-struct FDIConfig {
-  bool appearance = true;
-  bool human = true;
-  bool raw_rgb = true;
-};
-
-struct SPCConfig {
-  double voxel_size = 0.005 * 4;
-  int channels = 64;
-};
-
-struct ModelConfig {
-  Representation representation = Representation::transhuman;
-  EncoderConfig encoder;
-  GroupingConfig grouping;
-  TransHEConfig transhe;
-  DPaRFConfig dparf;
-  FDIConfig fdi;
-  SPCConfig spc;
-};
-
-struct RenderConfig {
-  int samples = 64;
-  bool progressive = true;
-  double cull_distance = 0.1;
-  int64_t chunk_points = 4096;
-  double termination_transmittance = 1e-4;
-  int64_t train_chunk_points = 4096;
-  Recompute train_recompute = Recompute::automatic;
-};
-
-struct TrainConfig {
-  int epochs = 3000;
-  int iters_per_epoch = 500;
-  double lr = 7e-4;
-  double min_lr = 1e-6;
-  int warmup_epochs = 300;
-  double beta1 = 0.9;
-  double beta2 = 0.999;
-  double eps = 1e-8;
-  double grad_clip = 40.0;
-  double lpips_weight = 0.1;
-  std::string lpips_weights = "";
-  bool skip_far_points = false;
-  int save_every_epochs = 10;
-  int val_every_epochs = 10;
-  int val_views = 2;
-  ViewRenderer val_renderer = ViewRenderer::exact;
-  int log_every_steps = 10;
-  double max_minutes = 0;
-  std::string dist_backend = "auto";
-  double dist_timeout_s = 300;
-  double dist_bucket_mb = 25;
-  bool sync_batchnorm = true;
-};
-
-struct EvalConfig {
-  std::string setting = "identity";
-  std::string lpips_weights = "";
-  int limit = 0;
-  bool save_images = true;
-  bool reuse_frames = true;
-  MismatchPolicy model_mismatch = MismatchPolicy::error;
-  ViewRenderer renderer = ViewRenderer::exact;
-  double bake_voxel = 0.02;
-};
-
-struct Config {
-  int64_t seed = 42;
-  std::string device = "auto";
-  PrecisionChoice precision = PrecisionChoice::fp32;
-  Fp32Products fp32_products = Fp32Products::automatic;
-  int threads = 0;
-  double max_memory_gb = 0;
-  DataConfig data;
-  ModelConfig model;
-  RenderConfig render;
-  TrainConfig train;
-  EvalConfig eval;
-};
-
-// ---- the keys ------------------------------------------------------------------------------
 // ---- data (METHOD 1, 2.1, 5)
-template <class V>
-void visit_fields(V& v, PatchConfig& c) {
-  v("count", c.count, config::in(1, 1024), "patches per target image");
-  v("size", c.size, config::in(1, 4096), "a patch's side in pixels");
-  v("body_prob", c.body_prob, config::in(0, 1),
-    "probability that a patch's centre lies on the person");
-}
-template <class V>
-void visit_fields(V& v, JitterConfig& c) {
-  v("enabled", c.enabled, "colour jitter (training only; the same for target and references)");
-  v("brightness", c.brightness, "factor range [low, high]");
-  v("contrast", c.contrast, "factor range [low, high]");
-  v("saturation", c.saturation, "factor range [low, high]");
-  v("hue", c.hue, "shift range [low, high] in turns");
-}
-template <class V>
-void visit_fields(V& v, DataConfig& c) {
-  v.choice("dataset", c.dataset, "which data: capture is your own (docs/YOUR_CAPTURE.md)");
-  v("root", c.root, "the folder holding one folder per person");
-  v.choice("layout", c.layout,
-           "a person's folder: ZJU-MoCap's (annots.npy) or EasyMocap's (intri.yml, extri.yml); "
-           "auto tells them apart");
-  v("person_id", c.person_id, config::at_least(-1),
-    "easymocap: the person's id in the SMPL files; -1: the only one");
-  v("split_file", c.split_file,
-    "people, frames and cameras per setting; empty: every person and frame under root");
-  v("reference_views", c.reference_views,
-    "fixed reference cameras by name or index, replacing the split's; empty: the split's, or "
-    "without a split the num_reference_views cameras most evenly spread around the body");
-  v("num_reference_views", c.num_reference_views, config::in(1, 64),
-    "reference cameras without a split file");
-  v("train_setting", c.train_setting, "the split's setting trained on");
-  v("test_setting", c.test_setting,
-    "the split's setting evaluated: pose | identity | one_shot | cross_dataset | fitting");
-  v("smpl_model", c.smpl_model, "SMPL .pkl/.npz; empty: <root>/smpl_model.npz");
-  v("ratio", c.ratio, config::in(0.01, 1), "image resize factor (1024 px -> 512 px: 0.5)");
-  v.choice("visibility", c.visibility,
-           "vertex visibility per reference view: rasterized here, or read from NHP's files");
-  v("visibility_root", c.visibility_root, "visibility: files: the folder of the files");
-  v.choice("visibility_missing", c.visibility_missing,
-           "visibility: files: a missing file is an error, or all vertices visible (warns)");
-  v("box_padding", c.box_padding, config::at_least(0),
-    "the world box's padding on z, in metres (METHOD 2.2)");
-  v.choice("calibration_check", c.calibration_check,
-           "calibration that cannot be right (intrinsics, rotations, the body out of a reference "
-           "view or at an implausible distance): an error, or a warning");
-  v.choice("border_band", c.border_band,
-           "the target mask's border band (METHOD 2.1): marked before undistortion [parity], or "
-           "after");
-  v("patch", c.patch, "training rays (METHOD 5)");
-  v("jitter", c.jitter, "colour jitter (METHOD 2.1)");
-  v("workers", c.workers, config::in(0, 256), "background loader threads");
-  v("prefetch", c.prefetch, config::in(1, 1024), "samples queued ahead");
-}
+#define TH_PATCH_KEYS(X)                                                 \
+  X(key, int, count, 6, config::in(1, 1024), "patches per target image") \
+  X(key, int, size, 20, config::in(1, 4096), "a patch's side in pixels") \
+  X(key, double, body_prob, 0.8, config::in(0, 1),                       \
+    "probability that a patch's centre lies on the person")
+TH_CONFIG_SECTION(PatchConfig, TH_PATCH_KEYS)
+
+#define TH_JITTER_KEYS(X)                                                      \
+  X(key, bool, enabled, true, {},                                              \
+    "colour jitter (training only; the same for target and references)")       \
+  X(key, std::vector<double>, brightness, (std::vector<double>{0.2, 2.0}), {}, \
+    "factor range [low, high]")                                                \
+  X(key, std::vector<double>, contrast, (std::vector<double>{0.3, 2.0}), {},   \
+    "factor range [low, high]")                                                \
+  X(key, std::vector<double>, saturation, (std::vector<double>{0.2, 2.0}), {}, \
+    "factor range [low, high]")                                                \
+  X(key, std::vector<double>, hue, (std::vector<double>{-0.5, 0.5}), {},       \
+    "shift range [low, high] in turns")
+TH_CONFIG_SECTION(JitterConfig, TH_JITTER_KEYS)
+
+#define TH_DATA_KEYS(X)                                                                            \
+  X(choice, DatasetKind, dataset, DatasetKind::synthetic, ,                                        \
+    "which data: capture is your own (docs/YOUR_CAPTURE.md)")                                      \
+  X(key, std::string, root, "data/synthetic", {}, "the folder holding one folder per person")      \
+  X(choice, DataLayout, layout, DataLayout::automatic, ,                                           \
+    "a person's folder: ZJU-MoCap's (annots.npy) or EasyMocap's (intri.yml, extri.yml); auto "     \
+    "tells them apart")                                                                            \
+  X(key, int, person_id, -1, config::at_least(-1),                                                 \
+    "easymocap: the person's id in the SMPL files; -1: the only one")                              \
+  X(key, std::string, split_file, "data_splits/synthetic.yaml", {},                                \
+    "people, frames and cameras per setting; empty: every person and frame under root")            \
+  X(key, std::vector<std::string>, reference_views, {}, {},                                        \
+    "fixed reference cameras by name or index, replacing the split's; empty: the split's, or "     \
+    "without a split the num_reference_views cameras most evenly spread around the body")          \
+  X(key, int, num_reference_views, 3, config::in(1, 64), "reference cameras without a split file") \
+  X(key, std::string, train_setting, "training", {}, "the split's setting trained on")             \
+  X(key, std::string, test_setting, "identity", {},                                                \
+    "the split's setting evaluated: pose | identity | one_shot | cross_dataset | fitting")         \
+  X(key, std::string, smpl_model, "", {}, "SMPL .pkl/.npz; empty: <root>/smpl_model.npz")          \
+  X(key, double, ratio, 0.5, config::in(0.01, 1), "image resize factor (1024 px -> 512 px: 0.5)")  \
+  X(choice, VisibilitySource, visibility, VisibilitySource::rasterize, ,                           \
+    "vertex visibility per reference view: rasterized here, or read from NHP's files")             \
+  X(key, std::string, visibility_root, "", {}, "visibility: files: the folder of the files")       \
+  X(choice, MissingVisibility, visibility_missing, MissingVisibility::error, ,                     \
+    "visibility: files: a missing file is an error, or all vertices visible (warns)")              \
+  X(key, double, box_padding, 0.05, config::at_least(0),                                           \
+    "the world box's padding on z, in metres (METHOD 2.2)")                                        \
+  X(choice, CalibrationCheck, calibration_check, CalibrationCheck::error, ,                        \
+    "calibration that cannot be right (intrinsics, rotations, the body out of a reference view "   \
+    "or at an implausible distance): an error, or a warning")                                      \
+  X(choice, BorderBand, border_band, BorderBand::distorted, ,                                      \
+    "the target mask's border band (METHOD 2.1): marked before undistortion [parity], or after")   \
+  X(section, PatchConfig, patch, , , "training rays (METHOD 5)")                                   \
+  X(section, JitterConfig, jitter, , , "colour jitter (METHOD 2.1)")                               \
+  X(key, int, workers, 2, config::in(0, 256), "background loader threads")                         \
+  X(key, int, prefetch, 4, config::in(1, 1024), "samples queued ahead")
+TH_CONFIG_SECTION(DataConfig, TH_DATA_KEYS)
+
 // ---- model (METHOD 2.5, 3)
 // What the retired execution keys of model.* (how the network was evaluated, never what it
 // computes) say when a config still sets them.
 inline constexpr const char* kRetiredExecutionKey =
     "the network always runs its fast forms (METHOD 9), chosen by device, precision and autograd";
-template <class V>
-void visit_fields(V& v, EncoderConfig& c) {
-  v("pretrained", c.pretrained, "ResNet-18 weights (scripts/export_pretrained.py); empty: random");
-  v.choice("batchnorm", c.batchnorm, "BatchNorm statistics: the batch's [parity] or running");
-  v.retired("fast_sampling", kRetiredExecutionKey);
-}
-template <class V>
-void visit_fields(V& v, GroupingConfig& c) {
-  v.choice("kind", c.kind, "how SMPL's vertices are grouped into tokens (METHOD 3.2)");
-  v("num_tokens", c.num_tokens, config::in(1, 6890),
-    "Nt, the token count (SMPL has 6890 vertices)");
-  v("kmeans_file", c.kmeans_file,
-    "the reference's kmeans_dict_300.npy (needed to import its .pth), or compute; empty: the "
-    "labels stored with the model");
-  v("cache_dir", c.cache_dir, "k-means labels cached here, keyed by body model and Nt");
-  v("seed", c.seed, "k-means seed");
-  v.choice("mean_over", c.mean_over,
-           "a token's feature: mean over all its vertices [parity] or the visible ones");
-}
-template <class V>
-void visit_fields(V& v, TransHEConfig& c) {
-  v("enabled", c.enabled, "the transformer; false: tokens go straight to DPaRF");
-  v.choice("position", c.position,
-           "the tokens' positional encoding: canonical centres, or posed (observation)");
-  v("dim", c.dim, config::at_least(1), "token width");
-  v("depth", c.depth, config::in(1, 64), "transformer blocks (enabled: false turns it off)");
-  v("heads", c.heads, config::at_least(1), "attention heads (must divide dim)");
-  v("mlp_dim", c.mlp_dim, config::at_least(1), "the blocks' MLP width");
-  v("pe_freqs", c.pe_freqs, config::at_least(1), "positional-encoding frequencies (6 x = dim)");
-  v("pe_scale", c.pe_scale, config::above(0), "Pc = mean(v_template[c]) / pe_scale");
-  v.choice("pe_rounding", c.pe_rounding,
-           "float32 sin(x f + phase): fused rounds once, as torch.addcmul [parity, METHOD 3.2]; "
-           "separate rounds the product and the sum (numpy)");
-}
-template <class V>
-void visit_fields(V& v, DPaRFConfig& c) {
-  v("nk", c.nk, "nearest fields per point (1..grouping.num_tokens)");
-  v.choice("coordinate", c.coordinate, "a point's coordinate in each field (METHOD 3.3)");
-  v("softmax_temperature", c.softmax_temperature, config::above(0), "w = softmax(-d / T)");
-  v("pe_freqs", c.pe_freqs, config::at_least(0), "positional-encoding frequencies of coordinates");
-  v.choice("pe_rounding", c.pe_rounding, "fused [parity] | separate, as transhe.pe_rounding");
-}
-template <class V>
-void visit_fields(V& v, FDIConfig& c) {
-  v("appearance", c.appearance, "a: the reference views' image features");
-  v("human", c.human, "h: the human representation branch");
-  v("raw_rgb", c.raw_rgb, "the reference pixels' colours in p_v");
-}
-template <class V>
-void visit_fields(V& v, SPCConfig& c) {
-  v("voxel_size", c.voxel_size, "the grid's voxel in metres (representation: spc_trilinear)");
-  v("channels", c.channels, config::at_least(1), "the grid's feature channels");
-}
-template <class V>
-void visit_fields(V& v, ModelConfig& c) {
-  v.choice("representation", c.representation,
-           "transhuman, or spc_trilinear (the NHP-style baseline)");
-  v("encoder", c.encoder, "image encoder (METHOD 2.5)");
-  v("grouping", c.grouping, "token groups (METHOD 3.2)");
-  v("transhe", c.transhe, "TransHE (METHOD 3.2)");
-  v("dparf", c.dparf, "DPaRF (METHOD 3.3)");
-  v("fdi", c.fdi, "FDI (METHOD 3.4)");
-  v("spc", c.spc, "the SPC + trilinear baseline");
-  v.retired("exact_shortcuts", kRetiredExecutionKey);
-  v.retired("readout_windows", kRetiredExecutionKey);
-}
+
+#define TH_ENCODER_KEYS(X)                                             \
+  X(key, std::string, pretrained, "", {},                              \
+    "ResNet-18 weights (scripts/export_pretrained.py); empty: random") \
+  X(choice, BatchNormStats, batchnorm, BatchNormStats::batch, ,        \
+    "BatchNorm statistics: the batch's [parity] or running")           \
+  X(retired, , fast_sampling, , , kRetiredExecutionKey)
+TH_CONFIG_SECTION(EncoderConfig, TH_ENCODER_KEYS)
+
+// model.grouping.kmeans_file's value that imports a reference checkpoint with token groups computed
+// here instead of the reference's own (METHOD 8): its renders then differ from the reference's.
+inline constexpr const char* kKMeansCompute = "compute";
+
+#define TH_GROUPING_KEYS(X)                                                                    \
+  X(choice, GroupingKind, kind, GroupingKind::canonical_kmeans, ,                              \
+    "how SMPL's vertices are grouped into tokens (METHOD 3.2)")                                \
+  X(key, int, num_tokens, 300, config::in(1, 6890),                                            \
+    "Nt, the token count (SMPL has 6890 vertices)")                                            \
+  X(key, std::string, kmeans_file, "", {},                                                     \
+    "the reference's kmeans_dict_300.npy (needed to import its .pth), or compute; empty: the " \
+    "labels stored with the model")                                                            \
+  X(key, std::string, cache_dir, "cache", {},                                                  \
+    "k-means labels cached here, keyed by body model and Nt")                                  \
+  X(key, int64_t, seed, 0, {}, "k-means seed")                                                 \
+  X(choice, MeanOver, mean_over, MeanOver::all, ,                                              \
+    "a token's feature: mean over all its vertices [parity] or the visible ones")
+TH_CONFIG_SECTION(GroupingConfig, TH_GROUPING_KEYS)
+
+#define TH_TRANSHE_KEYS(X)                                                                      \
+  X(key, bool, enabled, true, {}, "the transformer; false: tokens go straight to DPaRF")        \
+  X(choice, TokenPosition, position, TokenPosition::canonical, ,                                \
+    "the tokens' positional encoding: canonical centres, or posed (observation)")               \
+  X(key, int, dim, 192, config::at_least(1), "token width")                                     \
+  X(key, int, depth, 12, config::in(1, 64), "transformer blocks (enabled: false turns it off)") \
+  X(key, int, heads, 3, config::at_least(1), "attention heads (must divide dim)")               \
+  X(key, int, mlp_dim, 768, config::at_least(1), "the blocks' MLP width")                       \
+  X(key, int, pe_freqs, 32, config::at_least(1), "positional-encoding frequencies (6 x = dim)") \
+  X(key, double, pe_scale, 1.5, config::above(0), "Pc = mean(v_template[c]) / pe_scale")        \
+  X(choice, PeRounding, pe_rounding, PeRounding::fused, ,                                       \
+    "float32 sin(x f + phase): fused rounds once, as torch.addcmul [parity, METHOD 3.2]; "      \
+    "separate rounds the product and the sum (numpy)")
+TH_CONFIG_SECTION(TransHEConfig, TH_TRANSHE_KEYS)
+
+#define TH_DPARF_KEYS(X)                                                                           \
+  X(key, int, nk, 7, {}, "nearest fields per point (1..grouping.num_tokens)")                      \
+  X(choice, Coordinate, coordinate, Coordinate::relative, ,                                        \
+    "a point's coordinate in each field (METHOD 3.3)")                                             \
+  X(key, double, softmax_temperature, 0.5, config::above(0), "w = softmax(-d / T)")                \
+  X(key, int, pe_freqs, 10, config::at_least(0), "positional-encoding frequencies of coordinates") \
+  X(choice, PeRounding, pe_rounding, PeRounding::fused, ,                                          \
+    "fused [parity] | separate, as transhe.pe_rounding")
+TH_CONFIG_SECTION(DPaRFConfig, TH_DPARF_KEYS)
+
+#define TH_FDI_KEYS(X)                                                         \
+  X(key, bool, appearance, true, {}, "a: the reference views' image features") \
+  X(key, bool, human, true, {}, "h: the human representation branch")          \
+  X(key, bool, raw_rgb, true, {}, "the reference pixels' colours in p_v")
+TH_CONFIG_SECTION(FDIConfig, TH_FDI_KEYS)
+
+#define TH_SPC_KEYS(X)                                            \
+  X(key, double, voxel_size, 0.005 * 4, {},                       \
+    "the grid's voxel in metres (representation: spc_trilinear)") \
+  X(key, int, channels, 64, config::at_least(1), "the grid's feature channels")
+TH_CONFIG_SECTION(SPCConfig, TH_SPC_KEYS)
+
+#define TH_MODEL_KEYS(X)                                                  \
+  X(choice, Representation, representation, Representation::transhuman, , \
+    "transhuman, or spc_trilinear (the NHP-style baseline)")              \
+  X(section, EncoderConfig, encoder, , , "image encoder (METHOD 2.5)")    \
+  X(section, GroupingConfig, grouping, , , "token groups (METHOD 3.2)")   \
+  X(section, TransHEConfig, transhe, , , "TransHE (METHOD 3.2)")          \
+  X(section, DPaRFConfig, dparf, , , "DPaRF (METHOD 3.3)")                \
+  X(section, FDIConfig, fdi, , , "FDI (METHOD 3.4)")                      \
+  X(section, SPCConfig, spc, , , "the SPC + trilinear baseline")          \
+  X(retired, , exact_shortcuts, , , kRetiredExecutionKey)                 \
+  X(retired, , readout_windows, , , kRetiredExecutionKey)
+TH_CONFIG_SECTION(ModelConfig, TH_MODEL_KEYS)
+
 // ---- rendering (METHOD 4)
-template <class V>
-void visit_fields(V& v, RenderConfig& c) {
-  v("samples", c.samples, config::in(2, 4096), "samples per ray (16: the paper's fast variant)");
-  v("progressive", c.progressive,
-    "inference: distance culling, and colour only where the density is positive");
-  v("cull_distance", c.cull_distance, config::above(0),
-    "metres from the nearest body vertex beyond which a sample is empty");
-  v("chunk_points", c.chunk_points, config::in(1024, 1 << 24),
-    "per-point work in chunks of this many points (bench/results/model.md)");
-  v("termination_transmittance", c.termination_transmittance, config::in_below(0, 1),
-    "stop a ray once its transmittance is below this (changes rgb and acc by at most it); 0: "
-    "every kept sample");
-  v("train_chunk_points", c.train_chunk_points, config::in(256, 1 << 24),
-    "training: the per-point network's chunk, recomputed in the backward pass");
-  v.choice("train_recompute", c.train_recompute,
-           "training: always recompute each chunk in the backward pass (memory of one chunk), "
-           "never (keep every chunk's graph), or auto (keep up to model::kKeepGraphPoints points "
-           "per field call); the same weights bit for bit");
-}
+#define TH_RENDER_KEYS(X)                                                                         \
+  X(key, int, samples, 64, config::in(2, 4096), "samples per ray (16: the paper's fast variant)") \
+  X(key, bool, progressive, true, {},                                                             \
+    "inference: distance culling, and colour only where the density is positive")                 \
+  X(key, double, cull_distance, 0.1, config::above(0),                                            \
+    "metres from the nearest body vertex beyond which a sample is empty")                         \
+  X(key, int64_t, chunk_points, 4096, config::in(1024, 1 << 24),                                  \
+    "per-point work in chunks of this many points (bench/results/model.md)")                      \
+  X(key, double, termination_transmittance, 1e-4, config::in_below(0, 1),                         \
+    "stop a ray once its transmittance is below this (changes rgb and acc by at most it); 0: "    \
+    "every kept sample")                                                                          \
+  X(key, int64_t, train_chunk_points, 4096, config::in(256, 1 << 24),                             \
+    "training: the per-point network's chunk, recomputed in the backward pass")                   \
+  X(choice, Recompute, train_recompute, Recompute::automatic, ,                                   \
+    "training: always recompute each chunk in the backward pass (memory of one chunk), never "    \
+    "(keep every chunk's graph), or auto (keep up to model::kKeepGraphPoints points per field "   \
+    "call); the same weights bit for bit")
+TH_CONFIG_SECTION(RenderConfig, TH_RENDER_KEYS)
+
 // ---- training (METHOD 5)
-template <class V>
-void visit_fields(V& v, TrainConfig& c) {
-  v("epochs", c.epochs, config::in(1, 10000000), "epochs");
-  v("iters_per_epoch", c.iters_per_epoch, config::in(1, 10000000), "steps per epoch");
-  v("lr", c.lr, config::above(0), "peak learning rate");
-  v("min_lr", c.min_lr, config::at_least(0), "the cosine schedule's floor (at most lr)");
-  v("warmup_epochs", c.warmup_epochs, config::at_least(0), "linear warm-up (fewer than epochs)");
-  v("beta1", c.beta1, config::in_below(0, 1), "Adam's beta1");
-  v("beta2", c.beta2, config::in_below(0, 1), "Adam's beta2");
-  v("eps", c.eps, config::above(0), "Adam's epsilon");
-  v("grad_clip", c.grad_clip, config::above(0), "element-wise gradient clip");
-  v("lpips_weight", c.lpips_weight, config::at_least(0), "the perceptual term's weight");
-  v("lpips_weights", c.lpips_weights,
-    "LPIPS weights (scripts/export_lpips.py); empty: the perceptual term is off");
-  v("skip_far_points", c.skip_far_points,
-    "cull samples farther than render.cull_distance from the body in training too");
-  v("save_every_epochs", c.save_every_epochs, config::at_least(0),
-    "checkpoint interval; 0: only at the end (latest.pt is always written)");
-  v("val_every_epochs", c.val_every_epochs, config::at_least(0),
-    "validation interval; 0: only after the last epoch");
-  v("val_views", c.val_views, config::in(0, 1024), "views rendered per validation");
-  v.choice("val_renderer", c.val_renderer,
-           "validation views: exact (the network per sample) or baked (each frame baked at "
-           "eval.bake_voxel, its views marched through the grid; METHOD 7.1)");
-  v("log_every_steps", c.log_every_steps, config::at_least(1), "metrics line interval");
-  v("max_minutes", c.max_minutes, config::at_least(0),
-    "stop with a checkpoint after this wall time; 0: no limit");
-  v.choice("dist_backend", c.dist_backend, {"auto", "gloo", "nccl"},
-           "several ranks: the c10d backend (auto: nccl on CUDA when built in, else gloo)");
-  v("dist_timeout_s", c.dist_timeout_s, config::Range{0, 86400, true},
-    "seconds a rank waits for the others before it stops with an error");
-  v("dist_bucket_mb", c.dist_bucket_mb, config::Range{0, 4096, true},
-    "gradient all-reduce bucket size in MiB");
-  v("sync_batchnorm", c.sync_batchnorm,
-    "several ranks: the encoder's BatchNorm over every rank's images [parity]; false: each "
-    "rank's own");
-}
+#define TH_TRAIN_KEYS(X)                                                                        \
+  X(key, int, epochs, 3000, config::in(1, 10000000), "epochs")                                  \
+  X(key, int, iters_per_epoch, 500, config::in(1, 10000000), "steps per epoch")                 \
+  X(key, double, lr, 7e-4, config::above(0), "peak learning rate")                              \
+  X(key, double, min_lr, 1e-6, config::at_least(0), "the cosine schedule's floor (at most lr)") \
+  X(key, int, warmup_epochs, 300, config::at_least(0), "linear warm-up (fewer than epochs)")    \
+  X(key, double, beta1, 0.9, config::in_below(0, 1), "Adam's beta1")                            \
+  X(key, double, beta2, 0.999, config::in_below(0, 1), "Adam's beta2")                          \
+  X(key, double, eps, 1e-8, config::above(0), "Adam's epsilon")                                 \
+  X(key, double, grad_clip, 40.0, config::above(0), "element-wise gradient clip")               \
+  X(key, double, lpips_weight, 0.1, config::at_least(0), "the perceptual term's weight")        \
+  X(key, std::string, lpips_weights, "", {},                                                    \
+    "LPIPS weights (scripts/export_lpips.py); empty: the perceptual term is off")               \
+  X(key, bool, skip_far_points, false, {},                                                      \
+    "cull samples farther than render.cull_distance from the body in training too")             \
+  X(key, int, save_every_epochs, 10, config::at_least(0),                                       \
+    "checkpoint interval; 0: only at the end (latest.pt is always written)")                    \
+  X(key, int, val_every_epochs, 10, config::at_least(0),                                        \
+    "validation interval; 0: only after the last epoch")                                        \
+  X(key, int, val_views, 2, config::in(0, 1024), "views rendered per validation")               \
+  X(choice, ViewRenderer, val_renderer, ViewRenderer::exact, ,                                  \
+    "validation views: exact (the network per sample) or baked (each frame baked at "           \
+    "eval.bake_voxel, its views marched through the grid; METHOD 7.1)")                         \
+  X(key, int, log_every_steps, 10, config::at_least(1), "metrics line interval")                \
+  X(key, double, max_minutes, 0, config::at_least(0),                                           \
+    "stop with a checkpoint after this wall time; 0: no limit")                                 \
+  X(names, std::string, dist_backend, "auto", config::names("auto", "gloo", "nccl"),            \
+    "several ranks: the c10d backend (auto: nccl on CUDA when built in, else gloo)")            \
+  X(key, double, dist_timeout_s, 300, config::in_above(0, 86400),                               \
+    "seconds a rank waits for the others before it stops with an error")                        \
+  X(key, double, dist_bucket_mb, 25, config::in_above(0, 4096),                                 \
+    "gradient all-reduce bucket size in MiB")                                                   \
+  X(key, bool, sync_batchnorm, true, {},                                                        \
+    "several ranks: the encoder's BatchNorm over every rank's images [parity]; false: each "    \
+    "rank's own")
+TH_CONFIG_SECTION(TrainConfig, TH_TRAIN_KEYS)
+
 // ---- evaluation (METHOD 6)
-template <class V>
-void visit_fields(V& v, EvalConfig& c) {
-  v("setting", c.setting, "the split's setting scored");
-  v("lpips_weights", c.lpips_weights, "LPIPS weights; empty: LPIPS is not scored");
-  v("limit", c.limit, config::at_least(0), "images scored; 0: all");
-  v("save_images", c.save_images, "write each rendered view beside its scores");
-  v("reuse_frames", c.reuse_frames,
-    "target views of one frame share its prepared stages (encoder, TransHE, DPaRF tokens); "
-    "false: each view prepares its frame again");
-  v.choice("model_mismatch", c.model_mismatch,
-           "a checkpoint trained with other model.* values: error names the keys and stops, "
-           "warn names them and goes on");
-  v.choice("renderer", c.renderer,
-           "exact (the network per sample: the paper's protocol) or baked (each frame baked once, "
-           "its views marched through the grid: an approximate score; METHOD 7.1)");
-  v("bake_voxel", c.bake_voxel, config::in(0.001, 0.2),
-    "the baked renderer's lattice spacing, metres (eval.renderer and train.val_renderer baked)");
-}
-template <class V>
-void visit_fields(V& v, Config& c) {
-  v("seed", c.seed, "random seed");
-  v.choice("device", c.device, {"auto", "cpu", "cuda"}, "where the network runs");
-  v.choice("precision", c.precision,
-           "the network's matrix products: fp32 (the paper's numbers), bf16, or auto (bf16 "
-           "where the processor has native bf16 dot products; model/precision.hpp)");
-  v.choice("fp32_products", c.fp32_products,
-           "fp32 products on CPU: auto (oneDNN when LibTorch has it), onednn or blas");
-  v("threads", c.threads, config::in(0, 4096), "CPU threads for LibTorch; 0: one per core");
-  v("max_memory_gb", c.max_memory_gb, config::at_least(0),
-    "refuse work (render, mesh) estimated to need more; 0: 3/4 of physical memory");
-  v("data", c.data, "data (METHOD 1, 2.1)");
-  v("model", c.model, "the network (METHOD 2.5, 3)");
-  v("render", c.render, "rendering (METHOD 4)");
-  v("train", c.train, "training (METHOD 5)");
-  v("eval", c.eval, "evaluation (METHOD 6)");
-}
+#define TH_EVAL_KEYS(X)                                                                           \
+  X(key, std::string, setting, "identity", {}, "the split's setting scored")                      \
+  X(key, std::string, lpips_weights, "", {}, "LPIPS weights; empty: LPIPS is not scored")         \
+  X(key, int, limit, 0, config::at_least(0), "images scored; 0: all")                             \
+  X(key, bool, save_images, true, {}, "write each rendered view beside its scores")               \
+  X(key, bool, reuse_frames, true, {},                                                            \
+    "target views of one frame share its prepared stages (encoder, TransHE, DPaRF tokens); "      \
+    "false: each view prepares its frame again")                                                  \
+  X(choice, MismatchPolicy, model_mismatch, MismatchPolicy::error, ,                              \
+    "a checkpoint trained with other model.* values: error names the keys and stops, warn names " \
+    "them and goes on")                                                                           \
+  X(choice, ViewRenderer, renderer, ViewRenderer::exact, ,                                        \
+    "exact (the network per sample: the paper's protocol) or baked (each frame baked once, its "  \
+    "views marched through the grid: an approximate score; METHOD 7.1)")                          \
+  X(key, double, bake_voxel, 0.02, config::in(0.001, 0.2),                                        \
+    "the baked renderer's lattice spacing, metres (eval.renderer and train.val_renderer baked)")
+TH_CONFIG_SECTION(EvalConfig, TH_EVAL_KEYS)
+
+// ---- the whole tree
+#define TH_CONFIG_KEYS(X)                                                                       \
+  X(key, int64_t, seed, 42, {}, "random seed")                                                  \
+  X(names, std::string, device, "auto", config::names("auto", "cpu", "cuda"),                   \
+    "where the network runs")                                                                   \
+  X(choice, PrecisionChoice, precision, PrecisionChoice::fp32, ,                                \
+    "the network's matrix products: fp32 (the paper's numbers), bf16, or auto (bf16 where the " \
+    "processor has native bf16 dot products; model/precision.hpp)")                             \
+  X(choice, Fp32Products, fp32_products, Fp32Products::automatic, ,                             \
+    "fp32 products on CPU: auto (oneDNN when LibTorch has it), onednn or blas")                 \
+  X(key, int, threads, 0, config::in(0, 4096), "CPU threads for LibTorch; 0: one per core")     \
+  X(key, double, max_memory_gb, 0, config::at_least(0),                                         \
+    "refuse work (render, mesh) estimated to need more; 0: 3/4 of physical memory")             \
+  X(section, DataConfig, data, , , "data (METHOD 1, 2.1)")                                      \
+  X(section, ModelConfig, model, , , "the network (METHOD 2.5, 3)")                             \
+  X(section, RenderConfig, render, , , "rendering (METHOD 4)")                                  \
+  X(section, TrainConfig, train, , , "training (METHOD 5)")                                     \
+  X(section, EvalConfig, eval, , , "evaluation (METHOD 6)")
+TH_CONFIG_SECTION(Config, TH_CONFIG_KEYS)
 
 // Checks across fields (incompatible switches, one value bounded by another); throw th::Error.
 void validate_section(const DataConfig& c, const std::string& path);

@@ -1,28 +1,54 @@
 #pragma once
 // Typed configuration from YAML (the mechanism; the option tree itself is in config.hpp).
 //
-// A config section is a plain struct whose fields hold the type and the default, and a
-// `visit_fields` overload that declares each field once more with everything else about it: its
-// key, the values it accepts and a one-line description. That one list drives reading (type and
-// range checks, unknown keys), writing the resolved config, and the listing of every key
-// (`--config-keys`):
+// A config section declares each key once, in one line of its key list: what kind of key it is,
+// its C++ type, its name, its default, the values it accepts and a one-line description.
+// TH_CONFIG_SECTION makes the section's struct (plain fields with their defaults) and its
+// `visit_fields` from the list; that one list drives reading (type and range checks, unknown
+// keys), writing the resolved config, and the listing of every key (`--config-keys`):
 //
-//   struct PatchConfig { int count = 6; double body_prob = 0.8; bool enabled = true; };
-//   template <class V> void visit_fields(V& v, PatchConfig& c) {
-//     v("count", c.count, config::in(1, 1024), "patches per training image");
-//     v("body_prob", c.body_prob, config::in(0, 1), "chance that a patch is centred on the body");
-//     v("enabled", c.enabled, "sample patches at all");            // no range: any value
-//   }
-//   template <class V> void visit_fields(V& v, DataConfig& c) {
-//     v("patch", c.patch, "training rays");                        // nested section
-//     v.choice("dataset", c.dataset, "which reader");              // an enum with choice_names
-//     v.choice("device", c.device, {"auto", "cpu", "cuda"}, "where the network runs");
-//   }
+//   #define TH_PATCH_KEYS(X)
+//     X(key, int, count, 6, config::in(1, 1024), "patches per training image")
+//     X(key, bool, enabled, true, {}, "sample patches at all")        // {}: any value
+//     X(choice, DatasetKind, dataset, DatasetKind::synthetic, , "which reader")
+//     X(names, std::string, device, "auto", config::names("auto", "cpu"), "where it runs")
+//     X(section, JitterConfig, jitter, , , "colour jitter")
+//     X(retired, , old_key, , , "why it is no key any more")
+//   TH_CONFIG_SECTION(PatchConfig, TH_PATCH_KEYS)
+// (each line of the #define but the last ends in a backslash).
+//
+// Kinds: `key` (a number, string, bool or list; its values a Range, {} for any), `choice` (an
+// enum, read and written by the names of its choice_names), `names` (a string from a fixed
+// list), `section` (a nested section with its own key list), `retired` (no field: a key that is
+// no longer read; its description says why). A default with commas is parenthesised:
+// `(std::vector<double>{0.2, 2.0})`.
 //
 // Field types: bool, int, int64_t, double, float, std::string, std::vector of those, and
-// nested structs with their own visit_fields. Every number read must be finite. A struct may
-// also define `void validate_section(const T&, const std::string& path)` (found by ADL) that
-// throws th::Error for values that are each in range but make no sense together.
+// nested sections. Every number read must be finite. A section may also define
+// `void validate_section(const T&, const std::string& path)` (found by ADL) that throws th::Error
+// for values that are each in range but make no sense together.
+
+#define TH_CONFIG_SECTION(Name, KEYS) \
+  struct Name {                       \
+    KEYS(TH_CONFIG_FIELD)             \
+  };                                  \
+  template <class V>                  \
+  void visit_fields(V& v, Name& c) {  \
+    KEYS(TH_CONFIG_VISIT)             \
+  }
+#define TH_CONFIG_FIELD(kind, type, name, def, values, doc) TH_CONFIG_FIELD_##kind(type, name, def)
+#define TH_CONFIG_FIELD_key(type, name, def) type name = def;
+#define TH_CONFIG_FIELD_choice(type, name, def) type name = def;
+#define TH_CONFIG_FIELD_names(type, name, def) type name = def;
+#define TH_CONFIG_FIELD_section(type, name, def) type name;
+#define TH_CONFIG_FIELD_retired(type, name, def)
+#define TH_CONFIG_VISIT(kind, type, name, def, values, doc) \
+  TH_CONFIG_VISIT_##kind(name, values, doc)
+#define TH_CONFIG_VISIT_key(name, values, doc) v(#name, c.name, values, doc);
+#define TH_CONFIG_VISIT_choice(name, values, doc) v.choice(#name, c.name, doc);
+#define TH_CONFIG_VISIT_names(name, values, doc) v.choice(#name, c.name, values, doc);
+#define TH_CONFIG_VISIT_section(name, values, doc) v(#name, c.name, doc);
+#define TH_CONFIG_VISIT_retired(name, values, doc) v.retired(#name, doc);
 
 #include <yaml-cpp/yaml.h>
 
@@ -77,11 +103,19 @@ struct Range {
 };
 inline Range in(double low, double high) { return {low, high, false, false}; }       // [low, high]
 inline Range in_below(double low, double high) { return {low, high, false, true}; }  // [low, high)
+inline Range in_above(double low, double high) { return {low, high, true, false}; }  // (low, high]
 inline Range at_least(double low) {
   return {low, std::numeric_limits<double>::infinity(), false, false};
 }
 inline Range above(double low) {
   return {low, std::numeric_limits<double>::infinity(), true, false};
+}
+
+// The names a string key accepts (`names` keys).
+using Names = std::vector<const char*>;
+template <class... S>
+Names names(S... name) {
+  return {name...};
 }
 
 // An enum choice lists its YAML names once, found by argument-dependent lookup:
@@ -191,8 +225,7 @@ class Reader {
     check_numbers(path, field, range, doc);
   }
 
-  void choice(const char* key, std::string& field, std::initializer_list<const char*> allowed,
-              const char* doc = "") {
+  void choice(const char* key, std::string& field, const Names& allowed, const char* doc = "") {
     (*this)(key, field, doc);
     for (const char* a : allowed)
       if (field == a) return;
@@ -284,8 +317,7 @@ class Writer {
   void operator()(const char* key, const T& field, const Range&, const char*) {
     node_[key] = to_node(field);
   }
-  void choice(const char* key, const std::string& field, std::initializer_list<const char*>,
-              const char* = "") {
+  void choice(const char* key, const std::string& field, const Names&, const char* = "") {
     node_[key] = field;
   }
   template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
@@ -333,8 +365,7 @@ class Checker {
       check(field, path);
   }
   // Choices: an enum holds one of its names by construction; a string is checked as read.
-  void choice(const char*, const std::string&, std::initializer_list<const char*>,
-              const char* = "") {}
+  void choice(const char*, const std::string&, const Names&, const char* = "") {}
   template <class E, std::enable_if_t<std::is_enum_v<E>, int> = 0>
   void choice(const char*, const E&, const char* = "") {}
   void retired(const char*, const char*) {}
@@ -393,7 +424,7 @@ class Lister {
       add(path, type, Writer::to_node(field), range, doc);
     }
   }
-  void choice(const char* key, const std::string& field, std::initializer_list<const char*> allowed,
+  void choice(const char* key, const std::string& field, const Names& allowed,
               const char* doc = "") {
     std::string list;
     for (const char* a : allowed) list += std::string(list.empty() ? "" : ", ") + a;
