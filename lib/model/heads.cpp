@@ -24,6 +24,7 @@ HeadsFolded HeadsImpl::fold() const {
   f.e_weight = torch::mm(wc, feature_fc->weight);
   f.e_bias = torch::mv(wc, feature_fc->bias) + view_fc->bias;
   if (rgb_res_0) {  // w/o a: no readout of p_v
+    // A view of its own: view_fc's gradient then sums the two folds' parts in a fixed order.
     const auto wr = view_fc->weight.narrow(1, 0, 256);
     f.readout_weight = torch::cat({torch::mm(wr, rgb_res_0->weight), rgb_res_1->weight}, 0);
     f.readout_bias = torch::cat({torch::mv(wr, rgb_res_0->bias), rgb_res_1->bias}, 0);
