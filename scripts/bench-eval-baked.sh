@@ -3,18 +3,18 @@
 # scripts/demo.sh trains it, when runs/demo has none), each run a transhuman-eval process of its
 # own, writing bench/results/eval_baked.md:
 #   1. accuracy: the identity setting (108 views) scored exact and baked at 4, 2 and 1 cm, at the
-#      demo's 128x128 and at 512x512 (data.ratio=1), 16 samples per ray: per grid the mean and
-#      worst per-image difference to exact (PSNR, SSIM, LPIPS when eval.lpips_weights is given);
+#      demo's 128x128, 16 samples per ray: per grid the mean and worst per-image difference to
+#      exact (PSNR, SSIM, LPIPS when eval.lpips_weights is given);
 #   2. speed of the demo's evaluation: exact and baked 2 cm alternating, twice;
 #   3. the paper's identity protocol at 512x512, 64 samples per ray: 438 views, 73 frames of 6
 #      target views (the setting `protocol_438` added to a copy of the split: the 3 unseen people,
 #      every second frame), as ZJU-MoCap's identity set has them; baked 2 cm on all 438; exact fp32
-#      and bf16 on the first TH_BENCH_EXACT_VIEWS views (default 12) and baked 1 cm on the first
-#      108, each projected to 438 views from its measured times; the baked-minus-exact difference
-#      on the views both scored;
+#      and bf16 on the first TH_BENCH_EXACT_VIEWS views (default 12) and baked 1.5 and 1 cm on the
+#      first 108, each projected to 438 views from its measured times; the baked-minus-exact
+#      difference on the views both scored;
 #   4. validation while training: the demo's saved checkpoints ranked by exact and by baked 2 cm
 #      identity scores, and what one validation (train.val_views views) costs each way.
-# Runs for about 45 minutes on 2 cores; measure on an otherwise idle machine.
+# Runs for about 35 minutes on 2 cores; measure on an otherwise idle machine.
 #   scripts/bench-eval-baked.sh [SECTION...]   sections: accuracy speed protocol validation
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -58,16 +58,12 @@ has() { [[ " ${sections[*]} " == *" $1 "* ]]; }
 if has accuracy; then
   evaluate a128_exact "$ckpt"
   for v in 0.04 0.02 0.01; do evaluate "a128_baked_$v" "$ckpt" --baked --bake-voxel $v; done
-  evaluate a512_exact "$ckpt" data.ratio=1
-  for v in 0.04 0.02 0.01; do evaluate "a512_baked_$v" "$ckpt" --baked --bake-voxel $v data.ratio=1; done
 fi
 if has speed; then
   for round in 1 2; do
     evaluate "s128_exact_$round" "$ckpt"
     evaluate "s128_baked_$round" "$ckpt" --baked
-    evaluate "s512_baked_$round" "$ckpt" --baked data.ratio=1
   done
-  evaluate s512_exact_2 "$ckpt" data.ratio=1  # beside a512_exact: the exact 512 run twice
 fi
 if has protocol; then
   # The split with the 438-view setting beside the dataset's own.
@@ -84,6 +80,7 @@ SPLIT
   evaluate p_exact_fp32 "$ckpt" "${p[@]}" --limit "$exact_views" --precision fp32
   evaluate p_exact_bf16 "$ckpt" "${p[@]}" --limit "$exact_views" --precision bf16
   evaluate p_baked_0.02 "$ckpt" "${p[@]}" --baked --bake-voxel 0.02
+  evaluate p_baked_0.015 "$ckpt" "${p[@]}" --baked --bake-voxel 0.015 --limit 108
   evaluate p_baked_0.01 "$ckpt" "${p[@]}" --baked --bake-voxel 0.01 --limit 108
   setting=identity
 fi
@@ -129,13 +126,14 @@ out = [f'# Baked evaluation against exact ({time.strftime("%Y-%m-%d %H:%M UTC", 
        f'processor {cpu}, {os.cpu_count()} cores; load averages (1, 5, 15 min) at the start and end of each invocation: '
        + '; '.join(f'{what}: {value}' for what, value in load) + '. '
        'Each figure is one transhuman-eval process (scripts/bench-eval-baked.sh); seconds are wall time, '
-       'start-up (loading the data and the checkpoint) included.', '']
+       'start-up (loading the data and the checkpoint) included. A baked evaluation bakes each frame once, its colours '
+       'seen from the cameras of the views scored of it (METHOD 7.1).', '']
 lp = any(summary(n).get('lpips_available') == 'yes' for n in runs)
 if 'a128_exact' in runs:
     out += ['## Accuracy: baked minus exact, per image, 16 samples per ray', '',
             '| size | renderer | views | PSNR | PSNR diff: mean | worst | SSIM | SSIM diff: mean | worst | LPIPS diff: mean | worst | seconds |',
             '|---|---|---|---|---|---|---|---|---|---|---|---|']
-    for size in ('128', '512'):
+    for size in ('128',):
         e = f'a{size}_exact'
         s = summary(e)
         out.append(f'| {size}x{size} | exact | {s["images"]} | {s["psnr"]:.2f} | - | - | {s["ssim"]:.4f} | - | - | - | - | {runs[e]["seconds"]:.0f} |')
@@ -156,22 +154,20 @@ if 's128_exact_1' in runs:
         return statistics.median(runs[n]['seconds'] for n in names if n in runs)
     e128 = med(['s128_exact_1', 's128_exact_2'])
     b128 = med(['s128_baked_1', 's128_baked_2'])
-    e512 = med(['a512_exact', 's512_exact_2'])
-    b512 = med(['s512_baked_1', 's512_baked_2'])
     g = lambda n: f'{runs[n]["seconds"]:.1f}' if n in runs else '-'
     out.append(f'| 128x128 (the demo) | exact | {g("s128_exact_1")} | {g("s128_exact_2")} | {e128:.1f} | 1x |')
     out.append(f'| 128x128 (the demo) | baked 2 cm | {g("s128_baked_1")} | {g("s128_baked_2")} | {b128:.1f} | {e128 / b128:.1f}x |')
-    out.append(f'| 512x512 | exact | {g("a512_exact")} | {g("s512_exact_2")} | {e512:.1f} | 1x |')
-    out.append(f'| 512x512 | baked 2 cm | {g("s512_baked_1")} | {g("s512_baked_2")} | {b512:.1f} | {e512 / b512:.1f}x |')
     bake = [r for r in rows('s128_baked_1').values()]
     out += ['', f'A baked run spends its time on 18 bakes (one per frame; a row\'s seconds hold its frame\'s bake on the frame\'s first view): '
             f'{sum(num(r["seconds"]) for r in bake):.1f} s of rows at 128x128. The bake costs the same at any image size, '
-            'the exact render grows with the pixels: at 128x128 a frame\'s 6 exact views cost about as much as its bake.', '']
+            'the exact render grows with the pixels and the samples: at 128x128 and 16 samples a frame\'s 6 exact views ask '
+            'the network for about as many points as its bake (the 512x512 protocol below for the other end).', '']
 if 'p_exact_fp32' in runs:
     out += [f'## The paper\'s identity protocol: 438 views at 512x512, 64 samples per ray (73 frames x 6 views), projected', '',
             '| renderer | precision | views run | seconds run | per view s (rows) | bake per frame s | march per view s | 438 views | PSNR diff to exact fp32: mean | worst | SSIM diff: mean |',
             '|---|---|---|---|---|---|---|---|---|---|---|']
-    for name, prec in (('p_exact_fp32', 'fp32'), ('p_exact_bf16', 'bf16'), ('p_baked_0.02', 'fp32'), ('p_baked_0.01', 'fp32')):
+    for name, prec in (('p_exact_fp32', 'fp32'), ('p_exact_bf16', 'bf16'), ('p_baked_0.02', 'fp32'),
+                       ('p_baked_0.015', 'fp32'), ('p_baked_0.01', 'fp32')):
         if name not in runs:
             continue
         s = summary(name)
@@ -208,7 +204,7 @@ if 'p_exact_fp32' in runs:
         out.append(f'| {s["renderer"]} | {prec} | {s["images"]} | {wall:.0f} | {per_view:.2f} | {bake_s} | {march_s} | '
                    f'{wall / 60 if measured else projected / 60:.1f} min{" (measured)" if measured else ""} | {dm} | {dw} | {sm} |')
     out += ['', f'Setting protocol_438: the 3 unseen people, every second frame (24 + 24 + 25 frames), 6 target views each. '
-            f'Exact runs score its first {exact_views} views (2 frames), baked 1 cm its first 108 (18 frames), baked 2 cm all 438. '
+            f'Exact runs score its first {exact_views} views (2 frames), baked 1.5 and 1 cm its first 108 (18 frames), baked 2 cm all 438. '
             'Projection of a partial run: its rows\' seconds scaled to 438 views plus the rest of its wall time as it was (exact), '
             'or its whole wall time scaled by 438 / views (baked: frames and views grow alike). A baked row\'s seconds on a '
             'frame\'s first view hold the frame\'s preparation (encoder, painting, TransHE at 512x512) and its bake; "bake per '

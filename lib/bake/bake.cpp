@@ -75,6 +75,9 @@ void check_options(const BakeOptions& o) {
     fail("bake voxel = ", o.voxel, " m: must be in [0.001, 0.2] metres");
   if (o.coarse < 1 || o.coarse > 8) fail("bake coarse factor = ", o.coarse, ": must be in [1, 8]");
   if (o.brick < 2 || o.brick > 32) fail("bake brick = ", o.brick, ": must be in [2, 32] cells");
+  for (const auto& eye : o.eyes)
+    if (!(std::isfinite(eye[0]) && std::isfinite(eye[1]) && std::isfinite(eye[2])))
+      fail("bake eye (", eye[0], ", ", eye[1], ", ", eye[2], "): a camera centre must be finite");
 }
 
 std::array<double, 6> bake_box(const torch::Tensor& bounds) {
@@ -107,7 +110,9 @@ resources::Estimate bake_estimate(const std::array<double, 6>& box, const BakeOp
   // On the demo checkpoint 30% of the lattice is fine or coloured and 60% lies in stored bricks
   // (bench/results/bake.md, 1 cm): taken as 60% and all of the padded lattice.
   const double near = 0.6 * points;
-  const double sparse = near * 24 + near * 68 + padded * 80;
+  // A colour set per eye adds 12 bytes per coloured and per packed point.
+  const double sets = double(std::max<size_t>(1, options.eyes.size()));
+  const double sparse = near * 24 + near * (68 + 12 * (sets - 1)) + padded * (80 + 12 * (sets - 1));
   resources::Estimate e;
   e.what = fmt::format("bake of {} at --bake-voxel {} m (lattice {} x {} x {})", what,
                        options.voxel, l.cells[0] + 1, l.cells[1] + 1, l.cells[2] + 1);
@@ -211,8 +216,10 @@ BakedFrame bake_frame(const inference::Session& session, const inference::Prepar
   fine.view({-1}).index_put_({flat(fine_index)}, density(positions(fine_index, out.origin, h)));
   rep.seconds["fine"] = since(start);
 
-  // 3. Colour along the six axis directions where a ray can see it.
+  // 3. Colour where a ray can see it: along the six axis directions, or from each eye.
   start = Clock::now();
+  out.eyes = options.eyes;
+  const int sets = out.color_sets();
   const auto pos = fine > 0;
   const auto color_mask = dilate(pos, 1);
   const auto color_index = color_mask.nonzero();
@@ -223,12 +230,22 @@ BakedFrame bake_frame(const inference::Session& session, const inference::Prepar
                                         torch::kFloat32)
                               .view({6, 3});
   const auto color_pts = positions(color_index, out.origin, h);
-  auto colors = torch::zeros({rep.color_points, kColorDims}, torch::kFloat32);
+  auto colors = torch::zeros({rep.color_points, sets * kColorDims}, torch::kFloat32);
+  const auto eyes = [&] {
+    std::vector<double> flat_eyes;
+    for (const auto& eye : out.eyes) flat_eyes.insert(flat_eyes.end(), eye.begin(), eye.end());
+    return torch::tensor(flat_eyes, torch::kFloat64).view({-1, 1, 3});
+  }();
   const auto color_flat = flat(color_index);
   for (int64_t b = 0; b < rep.color_points; b += chunk) {
     const int64_t e = std::min(rep.color_points, b + chunk);
-    const auto seen = session.colors_along(frame, color_pts.slice(0, b, e), directions);
-    colors.slice(0, b, e).copy_(seen.rgb.mean(0));
+    const auto pts = color_pts.slice(0, b, e);
+    // The six axis directions' mean, or from each eye: (K, M, 3) directions, (M, K x 3) colours.
+    const auto seen = session.colors_along(
+        frame, pts, out.eyes.empty() ? directions : (pts.unsqueeze(0) - eyes).to(torch::kFloat32));
+    colors.slice(0, b, e).copy_(
+        out.eyes.empty() ? seen.rgb.mean(0)
+                         : seen.rgb.permute({1, 0, 2}).reshape({e - b, sets * kColorDims}));
     // The density of these points, asked of the network with their colour: exact values where
     // step 2 interpolated.
     fine.view({-1}).index_put_({color_flat.slice(0, b, e)}, seen.sigma);
@@ -276,7 +293,7 @@ BakedFrame bake_frame(const inference::Session& session, const inference::Prepar
   const auto rows = color_row.view({-1}).index_select(0, padded_flat);
   const auto color_values =
       torch::where(rows.ge(0).unsqueeze(1), colors.index_select(0, rows.clamp_min(0)),
-                   torch::zeros({1, kColorDims}, torch::kFloat32))
+                   torch::zeros({1, sets * kColorDims}, torch::kFloat32))
           .contiguous();
   out.density.assign(density_values.template data_ptr<float>(),
                      density_values.template data_ptr<float>() + density_values.numel());
@@ -359,22 +376,44 @@ SampleBakes::SampleBakes(const inference::Session& session, const BakeOptions& o
   march_.termination = session.config().render.termination_transmittance;
 }
 
-SampleBakes::View SampleBakes::render(const data::Sample& sample) {
+std::array<double, 3> camera_centre(const torch::Tensor& R, const torch::Tensor& T) {
+  const auto c =
+      -torch::mv(R.to(torch::kFloat64).reshape({3, 3}).t(), T.to(torch::kFloat64).reshape({3}));
+  return {c[0].item<double>(), c[1].item<double>(), c[2].item<double>()};
+}
+
+SampleBakes::View SampleBakes::render(const data::Sample& sample,
+                                      const std::vector<std::array<double, 3>>& frame_eyes) {
   View view;
+  const auto eye = camera_centre(sample.R, sample.T);
+  // Which of a list of eyes is this sample's camera (float32 cameras: within 0.1 mm).
+  const auto find = [&](const std::vector<std::array<double, 3>>& eyes) {
+    for (size_t k = 0; k < eyes.size(); ++k)
+      if (std::abs(eyes[k][0] - eye[0]) + std::abs(eyes[k][1] - eye[1]) +
+              std::abs(eyes[k][2] - eye[2]) <
+          1e-4)
+        return int(k);
+    return -1;
+  };
   if (!baked_ || baked_->human != sample.human || baked_->frame != sample.frame ||
-      baked_->reference_views != sample.reference_views) {
+      baked_->reference_views != sample.reference_views || find(baked_->eyes) < 0) {
     baked_.reset();  // the last frame's grid goes before the next is made
     const auto t0 = Clock::now();
     const auto prepared = session_.prepare(sample);
-    baked_ = bake_frame(session_, prepared, options_);
+    BakeOptions options = options_;
+    options.eyes = frame_eyes;
+    if (find(options.eyes) < 0) options.eyes.push_back(eye);
+    baked_ = bake_frame(session_, prepared, options);
     view.bake_seconds = since(t0);
     ++bakes_;
   }
+  MarchOptions march = march_;
+  march.color_set = find(baked_->eyes);
   const auto t0 = Clock::now();
   const auto image =
       render_baked(*baked_, sample.K.to(torch::kFloat64), sample.R.to(torch::kFloat64),
                    sample.T.to(torch::kFloat64).reshape({3, 1}), int(sample.target_image.size(1)),
-                   int(sample.target_image.size(0)), march_);
+                   int(sample.target_image.size(0)), march);
   const auto pixel = sample.ray_pixel.to(torch::kCPU);
   view.ray_rgb = image.rgb.reshape({-1, 3}).index_select(0, pixel);
   view.ray_acc = image.acc.reshape({-1}).index_select(0, pixel);

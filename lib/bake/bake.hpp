@@ -8,8 +8,10 @@
 //      fine values are the coarse ones, interpolated.
 //   3. Colour on the fine points with positive density or next to it (the inside of the body
 //      included: with few samples per ray, a ray's first sample with density can lie deep
-//      inside): the mean of the network's colours along the six axis directions, its trunk
-//      shared by the six (model::TransHumanImpl::forward_directions).
+//      inside): the mean of the network's colours along the six axis directions, or, given the
+//      cameras that will look (BakeOptions::eyes), the colour along the direction from each
+//      camera's centre; the trunk and the colour head's part before the direction are shared by
+//      the directions (model::TransHumanImpl::forward_directions).
 //   4. The bricks holding positive density are stored.
 
 #include <functional>
@@ -31,13 +33,16 @@ struct BakeOptions {
   double voxel = 0.02;  // fine lattice spacing, metres (the accuracy per spacing: METHOD 7.1)
   int coarse = 2;       // coarse spacing in fine voxels
   int brick = 8;        // cells per brick side
+  // Centres (world, metres) of the cameras the bake is for: one colour set each, seen from it.
+  // Empty: one colour set, the mean over the six axis directions (any camera).
+  std::vector<std::array<double, 3>> eyes;
 };
 
 struct BakeReport {
   std::map<std::string, double> seconds;  // per stage: coarse, fine, colour, pack
   int64_t coarse_points = 0;              // lattice points asked of the network, per stage
   int64_t fine_points = 0;
-  int64_t color_points = 0;  // points whose colour was asked (six directions each)
+  int64_t color_points = 0;  // points whose colour was asked (six directions or the eyes each)
   double total_seconds() const;
 };
 
@@ -103,6 +108,9 @@ class BakedViews {
   BakeReport report_;
 };
 
+// The centre (world, metres) of the camera X_c = R X + T: -R^T T.
+std::array<double, 3> camera_centre(const torch::Tensor& R, const torch::Tensor& T);
+
 // The renderer of scored views as every output names it: "exact", or "baked 2 cm" (the bake's
 // voxel in centimetres).
 std::string renderer_label(ViewRenderer renderer, double voxel);
@@ -110,8 +118,9 @@ std::string renderer_label(ViewRenderer renderer, double voxel);
 // Dataset views of loaded samples (evaluation, validation while training) rendered from bakes
 // of their frames: one bake per (person, frame, reference views), made when a sample of another
 // frame comes and dropped then, so one bake is held at a time (a setting's views come frame by
-// frame). The views are marched with the session's render.samples and
-// render.termination_transmittance, at the sample's own camera and size.
+// frame). The bake's colours are seen from the target cameras the caller names for the frame
+// (each view's own direction, no axis mean). The views are marched with the session's
+// render.samples and render.termination_transmittance, at the sample's own camera and size.
 class SampleBakes {
  public:
   SampleBakes(const inference::Session& session, const BakeOptions& options);
@@ -122,7 +131,11 @@ class SampleBakes {
     double march_seconds = 0;
     MarchStats stats;
   };
-  View render(const data::Sample& sample);
+  // `frame_eyes`: the centres of the target cameras of this sample's frame that will be rendered
+  // from its bake (camera_centre); the sample's own is added when missing, and a bake that lacks
+  // it is made again.
+  View render(const data::Sample& sample,
+              const std::vector<std::array<double, 3>>& frame_eyes = {});
 
   int64_t bakes() const { return bakes_; }  // frames baked so far
   int64_t views() const { return views_; }

@@ -112,6 +112,9 @@ void write_baked(const BakedFrame& f, const fs::path& path) {
   const std::string where = "bake file '" + path.string() + "'";
   std::error_code ec;
   if (fs::exists(fs::symlink_status(path, ec))) fail(where, " exists: name a new file");
+  if (!f.eyes.empty())
+    fail(where, ": a bake with a colour per camera (", f.eyes.size(),
+         " cameras) serves only those cameras and is not written");
   Json header{{"format", "transhuman baked frame"},
               {"version", kVersion},
               {"little_endian", true},

@@ -11,7 +11,9 @@
 //
 // Colour per lattice point: the mean of the network's colours along the six axis directions.
 // The direction is not kept: on the demo checkpoint, degree-1 spherical harmonics fitted to the
-// six colours scored no better against the ground truth than their mean (bench/results/bake.md).
+// six colours scored no better against the ground truth than their mean (METHOD 7.1). A bake
+// for known cameras (an evaluation's target views) holds instead one colour per camera, seen
+// from its centre: a colour set per eye.
 
 #include <array>
 #include <cstdint>
@@ -40,10 +42,14 @@ struct BakedFrame {
   std::array<double, 6> box{};     // the frame's box (min x, y, z, max x, y, z): rays' near/far
   double cull_distance = 0;        // the renderer's culling distance when baked (render key)
 
+  // Cameras' centres (world) the colours are seen from, one colour set each; empty: one set, the
+  // mean over the six axis directions. Bakes with eyes stay in memory (write_baked refuses them).
+  std::vector<std::array<double, 3>> eyes;
+
   // Per brick of the brick grid (x slowest, z fastest): its slot, or -1 where nothing is stored.
   std::vector<int32_t> slot;
-  // Per slot: density (brick + 1)^3 and colour (brick + 1)^3 x kColorDims, lattice points x
-  // slowest, z fastest.
+  // Per slot: density (brick + 1)^3 and colour (brick + 1)^3 x color_sets() x kColorDims,
+  // lattice points x slowest, z fastest.
   std::vector<float> density;
   std::vector<float> color;
 
@@ -56,12 +62,14 @@ struct BakedFrame {
   std::array<int64_t, 3> bricks() const;  // bricks per axis: ceil(cells / brick)
   int64_t points_per_brick() const { return int64_t(brick + 1) * (brick + 1) * (brick + 1); }
   int64_t stored_bricks() const;
+  int color_sets() const { return eyes.empty() ? 1 : int(eyes.size()); }
   int64_t bytes() const;  // of the grid in memory (what a file holds, header aside)
 };
 
 // Writes `frame` to the new file `path` (binary: a versioned header, then the arrays). The file
 // appears complete or not at all, and only where nothing was: th::Error naming it when it exists,
-// or when another writer made it while this one wrote (of two writers, one wins).
+// or when another writer made it while this one wrote (of two writers, one wins), or when the
+// frame has eyes (its colours serve only its cameras).
 void write_baked(const BakedFrame& frame, const std::filesystem::path& path);
 
 // Reads and checks a file written by write_baked: a regular file (a FIFO or a device is refused

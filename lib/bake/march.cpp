@@ -49,8 +49,9 @@ class Grid {
     return true;
   }
 
-  // Trilinear interpolation of `dims` values per lattice point from `data`, into out[dims].
-  void interpolate(const float* data, int dims, const Location& at, float* out) const {
+  // Trilinear interpolation of `dims` values at `data` of each lattice point (`stride` floats
+  // per point), into out[dims].
+  void interpolate(const float* data, int stride, int dims, const Location& at, float* out) const {
     const int64_t dx = P_ * P_, dy = P_;
     const float wx[2] = {1 - at.fx, at.fx}, wy[2] = {1 - at.fy, at.fy}, wz[2] = {1 - at.fz, at.fz};
     for (int c = 0; c < dims; ++c) out[c] = 0;
@@ -58,7 +59,7 @@ class Grid {
       for (int b = 0; b < 2; ++b)
         for (int c = 0; c < 2; ++c) {
           const float weight = wx[a] * wy[b] * wz[c];
-          const float* v = data + (at.base + a * dx + b * dy + c) * dims;
+          const float* v = data + (at.base + a * dx + b * dy + c) * stride;
           for (int d = 0; d < dims; ++d) out[d] += weight * v[d];
         }
   }
@@ -119,6 +120,9 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
   TORCH_CHECK(options.samples >= 2, "render_baked: at least 2 samples per ray, got ",
               options.samples);
   TORCH_CHECK(width > 0 && height > 0, "render_baked: empty image ", width, "x", height);
+  TORCH_CHECK(options.color_set >= 0 && options.color_set < frame.color_sets(),
+              "render_baked: colour set ", options.color_set, " of a bake with ",
+              frame.color_sets());
   const auto Kinv = torch::inverse(K.to(torch::kFloat64)).contiguous();
   const auto Rm = R.to(torch::kFloat64).contiguous();
   const auto origin = -torch::mv(Rm.t(), T.to(torch::kFloat64).reshape({3})).contiguous();
@@ -137,6 +141,8 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
   float* acc = out.acc.data_ptr<float>();
   const Grid grid(frame);
   const int S = options.samples;
+  const int color_stride = kColorDims * frame.color_sets();
+  const float* color = frame.color.data() + kColorDims * options.color_set;
   const double tau = options.termination;
   std::atomic<int64_t> rays{0}, samples{0}, occupied{0}, terminated{0};
 
@@ -165,7 +171,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           if (!grid.locate(p, at)) continue;
           ++n_occupied;
           float sigma = 0;
-          grid.interpolate(frame.density.data(), 1, at, &sigma);
+          grid.interpolate(frame.density.data(), 1, 1, at, &sigma);
           if (!(sigma > 0)) continue;
           const double delta =
               (i + 1 < S
@@ -175,7 +181,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           const double alpha = 1 - std::exp(-double(sigma) * delta);
           const double weight = alpha * trans;
           float col[kColorDims];
-          grid.interpolate(frame.color.data(), kColorDims, at, col);
+          grid.interpolate(color, color_stride, kColorDims, at, col);
           r += weight * std::clamp(col[0], 0.0f, 1.0f);
           g += weight * std::clamp(col[1], 0.0f, 1.0f);
           b += weight * std::clamp(col[2], 0.0f, 1.0f);

@@ -19,6 +19,7 @@ namespace th::bake {
 struct MarchOptions {
   int samples = 64;           // per ray, as render.samples
   double termination = 1e-4;  // stop a ray once its transmittance is below this (0: never)
+  int color_set = 0;          // which of the bake's colour sets (BakedFrame::eyes) to show
 };
 
 struct MarchStats {

@@ -347,9 +347,17 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
   data::Prefetcher loader(dataset, order, std::vector<uint64_t>(order.size(), 0),
                           config.data.workers, config.data.prefetch);
   if (ranks > 1) spdlog::info("eval: {} views over {} ranks ({} here)", n, ranks, mine.size());
-  if (baked)
+  // A frame's bake colours its points as seen from the cameras of its views scored here.
+  std::map<std::pair<int, int>, std::vector<std::array<double, 3>>> frame_eyes;
+  if (baked) {
+    for (const size_t i : order) {
+      const auto& it = dataset->item(i);
+      const auto& camera = dataset->humans()[size_t(it.human)]->camera(it.target_view);
+      frame_eyes[{it.human, it.frame}].push_back(bake::camera_centre(camera.R, camera.T));
+    }
     spdlog::info("eval: views {} (eval.renderer baked, eval.bake_voxel {} m): one bake per frame",
                  renderer, config.eval.bake_voxel);
+  }
 
   // One view: its scores and counts, and its panel's PNG bytes, as a record (sent to rank 0 by
   // the others).
@@ -362,7 +370,8 @@ EvalSummary evaluate(const Config& config, const torch::Device& device, const fs
     pipeline::ViewResult r;
     try {
       if (bakes) {
-        const auto view = bakes->render(s);
+        const auto& it = dataset->item(size_t(item));
+        const auto view = bakes->render(s, frame_eyes.at({it.human, it.frame}));
         r = pipeline::score_view(view.ray_rgb, view.ray_acc, s, lpips.get(), device);
         r.seconds = view.bake_seconds + view.march_seconds;
         r.stats.points = view.stats.samples;

@@ -231,14 +231,20 @@ Session::DirectionalColors Session::colors_along(const PreparedFrame& frame,
                                                  const torch::Tensor& directions) const {
   TORCH_CHECK(pts.dim() == 2 && pts.size(1) == 3, "colors_along: pts must be (N, 3), got ",
               pts.sizes());
+  TORCH_CHECK(
+      directions.size(-1) == 3 &&
+          (directions.dim() == 2 || (directions.dim() == 3 && directions.size(1) == pts.size(0))),
+      "colors_along: directions must be (K, 3) or (K, ", pts.size(0), ", 3), got ",
+      directions.sizes());
   torch::NoGradGuard no_grad;
   const int64_t n = pts.size(0), k = directions.size(0);
   DirectionalColors out{torch::zeros({n}, torch::kFloat32),
                         torch::zeros({k, n, 3}, torch::kFloat32)};
   const auto dirs = directions.to(device_, torch::kFloat32);
   render::for_each_chunk(n, config_.render.chunk_points, [&](int64_t b, int64_t e) {
-    const auto raw = model_->forward_directions(
-        frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32), dirs);
+    const auto raw =
+        model_->forward_directions(frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32),
+                                   dirs.dim() == 3 ? dirs.slice(1, b, e) : dirs);
     auto sigma = raw.sigma;
     if (const auto& body = frame.cache.geometry.body)  // culled as density() culls
       sigma = torch::where(body->near(pts.slice(0, b, e).to(device_, torch::kFloat32)), sigma,

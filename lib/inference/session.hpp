@@ -113,9 +113,10 @@ class Session {
                       const torch::Tensor& dirs) const;
 
   // Raw density (N) and colours (K, N, 3) in [0, 1] of world points pts (N, 3) seen along each
-  // of the K directions (K, 3) (baking, METHOD 7.1): the network's per-point work is shared by
-  // the directions. sigma is 0 farther than render.cull_distance from the body, as density()
-  // gives it; the colours are the network's everywhere. In chunks; float32 CPU.
+  // of the K directions (K, 3), or K directions per point (K, N, 3) (baking, METHOD 7.1): the
+  // network's per-point work is shared by the directions. sigma is 0 farther than
+  // render.cull_distance from the body, as density() gives it; the colours are the network's
+  // everywhere. In chunks; float32 CPU.
   struct DirectionalColors {
     torch::Tensor sigma, rgb;
   };

@@ -38,21 +38,32 @@ torch::Tensor HeadsImpl::density(const torch::Tensor& e, const Products& P) cons
 }
 
 // view_fc(cat(c, gamma)) = (view_fc_c . feature_fc) e + view_fc_c rgb_res_0(p) + view_fc_d gamma
-// + b, with the pixel side read as one readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v.
+// + b, with the pixel side read as one readout [view_fc_c . rgb_res_0 ; rgb_res_1] of p_v. The
+// product with e does not depend on the direction: it is made once for all the directions.
 torch::Tensor HeadsImpl::colour(const HeadsFolded& f, const torch::Tensor& e,
                                 const torch::Tensor& readout, const torch::Tensor& dir_code,
                                 const Products& P) const {
-  const auto direction =
-      P.linear_fp32(dir_code, view_fc->weight.narrow(1, 256, kernels::kDirectionEncodingDim));
-  auto c = Products::fp32(P.linear(e, f.e_weight, f.e_bias)).add_(direction.unsqueeze(1));
-  if (rgb_res_0) {
-    const int64_t half = readout.size(2) / 2;
-    c = c.add_(readout.narrow(2, 0, half)).relu_() + readout.narrow(2, half, half);
-  } else {  // w/o a: no readout of p_v
-    c = c.relu_();
+  TORCH_CHECK(dir_code.dim() == 2 || dir_code.dim() == 3,
+              "colour: direction codes must be (N, 27) or (K, N, 27), got ", dir_code.sizes());
+  const bool many = dir_code.dim() == 3;
+  const auto codes = many ? dir_code : dir_code.unsqueeze(0);
+  const auto base = Products::fp32(P.linear(e, f.e_weight, f.e_bias));
+  std::vector<torch::Tensor> rgb;
+  for (int64_t k = 0; k < codes.size(0); ++k) {
+    const auto direction =
+        P.linear_fp32(codes[k], view_fc->weight.narrow(1, 256, kernels::kDirectionEncodingDim))
+            .unsqueeze(1);
+    auto c = many ? base + direction : base.add_(direction);
+    if (rgb_res_0) {
+      const int64_t half = readout.size(2) / 2;
+      c = c.add_(readout.narrow(2, 0, half)).relu_() + readout.narrow(2, half, half);
+    } else {  // w/o a: no readout of p_v
+      c = c.relu_();
+    }
+    const auto h = P.linear_fp32(c.mean(1), fc_4->weight, fc_4->bias).relu_();
+    rgb.push_back(P.linear_fp32(h, rgb_fc->weight, rgb_fc->bias));
   }
-  const auto h = P.linear_fp32(c.mean(1), fc_4->weight, fc_4->bias).relu_();
-  return P.linear_fp32(h, rgb_fc->weight, rgb_fc->bias);
+  return many ? torch::stack(rgb) : rgb[0];
 }
 
 }  // namespace th::model

@@ -30,7 +30,8 @@ class HeadsImpl : public torch::nn::Module {
   // The density head: e_v (N, V, 256) -> sigma_raw (N) fp32.
   torch::Tensor density(const torch::Tensor& e, const Products& products) const;
   // The colour head: e_v, the folded readout of p_v at the points (N, V, 256; undefined w/o
-  // appearance) and gamma(d) (N, 27) -> rgb logits (N, 3) fp32.
+  // appearance) and gamma(d) (N, 27) -> rgb logits (N, 3) fp32; gamma(d) (K, N, 27) of K
+  // directions per point -> (K, N, 3), the part before the direction made once.
   torch::Tensor colour(const HeadsFolded& folded, const torch::Tensor& e,
                        const torch::Tensor& readout, const torch::Tensor& dir_code,
                        const Products& products) const;

@@ -124,7 +124,10 @@ torch::Tensor TransHumanImpl::colour_readout(const FrameCache& frame, const Trun
 // 3.4 The colour head: rgb logits from e_v, p_v and the view direction's code gamma(d).
 torch::Tensor TransHumanImpl::colour(const FrameCache& frame, const Trunk& t,
                                      const torch::Tensor& readout, const torch::Tensor& dirs) {
-  const auto code = kernels::direction_encoding(dirs / dirs.norm(2, 1, true));
+  const auto unit = (dirs / dirs.norm(2, -1, true)).reshape({-1, 3});
+  const auto code = kernels::direction_encoding(unit).view(
+      dirs.dim() == 3 ? std::vector<int64_t>{dirs.size(0), dirs.size(1), -1}
+                      : std::vector<int64_t>{dirs.size(0), -1});
   ScopedTimer timer(profile_, "heads");
   return heads->colour(frame.network.heads, t.e, readout, code, products_);
 }
@@ -144,18 +147,17 @@ torch::Tensor TransHumanImpl::density(const FrameCache& frame, const torch::Tens
 TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& frame,
                                                                   const torch::Tensor& pts,
                                                                   const torch::Tensor& directions) {
-  TORCH_CHECK(directions.dim() == 2 && directions.size(1) == 3,
-              "forward_directions: directions must be (K, 3), got ", directions.sizes());
+  const int64_t n = pts.size(0);
+  TORCH_CHECK((directions.dim() == 2 && directions.size(1) == 3) ||
+                  (directions.dim() == 3 && directions.size(1) == n && directions.size(2) == 3),
+              "forward_directions: directions must be (K, 3) or (K, ", n, ", 3), got ",
+              directions.sizes());
   const auto t = trunk(frame, pts);
   DirectionalRaw out;
   out.sigma = density(t);
-  const auto readout = colour_readout(frame, t);
-  std::vector<torch::Tensor> rgb;
-  for (int64_t k = 0; k < directions.size(0); ++k) {
-    const auto d = directions[k].to(pts.options()).unsqueeze(0).expand({pts.size(0), 3});
-    rgb.push_back(colour(frame, t, readout, d));
-  }
-  out.rgb = torch::stack(rgb);
+  const auto d = directions.to(pts.options());
+  out.rgb = colour(frame, t, colour_readout(frame, t),
+                   d.dim() == 2 ? d.unsqueeze(1).expand({d.size(0), n, 3}) : d);
   return out;
 }
 

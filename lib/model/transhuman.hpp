@@ -50,10 +50,11 @@ class TransHumanImpl : public torch::nn::Module {
   // extraction). One chunk, as forward.
   torch::Tensor density(const FrameCache& cache, const torch::Tensor& pts);
 
-  // Density and colour of points seen along K directions (baking, METHOD 7.1): the trunk and the
-  // pixel sampling run once, the colour head once per direction. pts: (N, 3) world, directions:
-  // (K, 3) any length -> sigma_raw (N) and rgb logits (K, N, 3); equal to forward() with each
-  // direction. One chunk, as forward.
+  // Density and colour of points seen along K directions (baking, METHOD 7.1): the trunk, the
+  // pixel sampling and the colour head's product with e_v run once, the rest of the colour head
+  // once per direction. pts: (N, 3) world, directions: (K, 3), or (K, N, 3) per point, any
+  // length -> sigma_raw (N) and rgb logits (K, N, 3); equal to forward() with each direction.
+  // One chunk, as forward.
   struct DirectionalRaw {
     torch::Tensor sigma, rgb;
   };

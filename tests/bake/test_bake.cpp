@@ -267,6 +267,41 @@ TEST_CASE("a bake holds the network's density and colour at its lattice points",
   const auto one = session.color(frame, pts.index_select(0, positive),
                                  dirs[2].unsqueeze(0).expand({positive.size(0), 3}));
   CHECK((one - seen.rgb[2]).abs().max().item<double>() < 1e-5);
+
+  // A bake for two cameras: the same density, and a colour set per eye, each the network's
+  // colour seen from that camera's centre along the direction to the point.
+  auto for_eyes = options;
+  for_eyes.eyes = {{0.3, -2.5, 1.2}, {-1.8, 0.4, 0.9}};
+  const auto eyed = th::bake::bake_frame(session, frame, for_eyes);
+  REQUIRE(eyed.color_sets() == 2);
+  REQUIRE(eyed.slot == baked.slot);
+  CHECK((torch::tensor(eyed.density) - torch::tensor(baked.density)).abs().max().item<double>() <
+        1e-6);
+  const auto seen_pts = pts.index_select(0, positive);
+  const auto eyed_color = torch::tensor(eyed.color, torch::kFloat32)
+                              .view({-1, 2, 3})
+                              .index_select(0, idx.index_select(0, positive));
+  for (int k = 0; k < 2; ++k) {
+    const auto eye = torch::tensor(
+        {for_eyes.eyes[size_t(k)][0], for_eyes.eyes[size_t(k)][1], for_eyes.eyes[size_t(k)][2]},
+        torch::kFloat64);
+    const auto from_eye = session.color(frame, seen_pts, seen_pts - eye);
+    CHECK((eyed_color.select(1, k) - from_eye).abs().max().item<double>() < 1e-5);
+  }
+  CHECK((eyed_color.select(1, 0) - eyed_color.select(1, 1)).abs().max().item<double>() > 1e-3);
+  // Each set marches on its own; a set the bake lacks, and writing the bake, are refused.
+  const auto cam0 = session.dataset_camera(frame, 0);
+  auto march = th::bake::MarchOptions{};
+  const auto set0 = th::bake::render_baked(eyed, cam0.K, cam0.R, cam0.T, 32, 24, march);
+  march.color_set = 1;
+  const auto set1 = th::bake::render_baked(eyed, cam0.K, cam0.R, cam0.T, 32, 24, march);
+  CHECK(torch::equal(set0.acc, set1.acc));
+  CHECK(!torch::equal(set0.rgb, set1.rgb));
+  march.color_set = 2;
+  CHECK_THROWS(th::bake::render_baked(eyed, cam0.K, cam0.R, cam0.T, 32, 24, march));
+  CHECK_THROWS_WITH(th::bake::write_baked(eyed, run / "eyed.thbake"),
+                    Catch::Contains("a colour per camera (2 cameras)"));
+  CHECK(!fs::exists(run / "eyed.thbake"));
   // A video through the baked renderer: what BakedViews renders is the march of this bake.
   th::bake::BakedViews views(session, options);
   const auto cam = session.dataset_camera(frame, 0);
