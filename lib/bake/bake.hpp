@@ -1,6 +1,6 @@
 #pragma once
 // Baking a prepared frame (METHOD 7.1): the network's density on a lattice near the body, coarse
-// to fine, and its colour along six directions where a ray can see it.
+// to fine, and its colour where a ray can see it (along six directions, or from given cameras).
 //   1. Density on the coarse lattice (spacing voxel x coarse) over the frame's box; points
 //      farther than render.cull_distance from the body are 0, as the exact renderer culls them.
 //   2. Coarse cells whose corners are not all of one sign (the surface passes through them),

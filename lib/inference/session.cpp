@@ -242,9 +242,9 @@ Session::DirectionalColors Session::colors_along(const PreparedFrame& frame,
                         torch::zeros({k, n, 3}, torch::kFloat32)};
   const auto dirs = directions.to(device_, torch::kFloat32);
   render::for_each_chunk(n, config_.render.chunk_points, [&](int64_t b, int64_t e) {
-    const auto raw =
-        model_->forward_directions(frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32),
-                                   dirs.dim() == 3 ? dirs.slice(1, b, e) : dirs);
+    const auto raw = model_->forward_directions(
+        frame.cache, pts.slice(0, b, e).to(device_, torch::kFloat32),
+        dirs.dim() == 3 ? dirs.slice(1, b, e) : dirs.unsqueeze(1).expand({k, e - b, 3}));
     auto sigma = raw.sigma;
     if (const auto& body = frame.cache.geometry.body)  // culled as density() culls
       sigma = torch::where(body->near(pts.slice(0, b, e).to(device_, torch::kFloat32)), sigma,

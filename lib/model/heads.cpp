@@ -43,8 +43,6 @@ torch::Tensor HeadsImpl::density(const torch::Tensor& e, const Products& P) cons
 torch::Tensor HeadsImpl::colour(const HeadsFolded& f, const torch::Tensor& e,
                                 const torch::Tensor& readout, const torch::Tensor& dir_code,
                                 const Products& P) const {
-  TORCH_CHECK(dir_code.dim() == 2 || dir_code.dim() == 3,
-              "colour: direction codes must be (N, 27) or (K, N, 27), got ", dir_code.sizes());
   const bool many = dir_code.dim() == 3;
   const auto codes = many ? dir_code : dir_code.unsqueeze(0);
   const auto base = Products::fp32(P.linear(e, f.e_weight, f.e_bias));

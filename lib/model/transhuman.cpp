@@ -124,10 +124,7 @@ torch::Tensor TransHumanImpl::colour_readout(const FrameCache& frame, const Trun
 // 3.4 The colour head: rgb logits from e_v, p_v and the view direction's code gamma(d).
 torch::Tensor TransHumanImpl::colour(const FrameCache& frame, const Trunk& t,
                                      const torch::Tensor& readout, const torch::Tensor& dirs) {
-  const auto unit = (dirs / dirs.norm(2, -1, true)).reshape({-1, 3});
-  const auto code = kernels::direction_encoding(unit).view(
-      dirs.dim() == 3 ? std::vector<int64_t>{dirs.size(0), dirs.size(1), -1}
-                      : std::vector<int64_t>{dirs.size(0), -1});
+  const auto code = kernels::direction_encoding(dirs / dirs.norm(2, -1, true));
   ScopedTimer timer(profile_, "heads");
   return heads->colour(frame.network.heads, t.e, readout, code, products_);
 }
@@ -146,19 +143,12 @@ torch::Tensor TransHumanImpl::density(const FrameCache& frame, const torch::Tens
 
 TransHumanImpl::DirectionalRaw TransHumanImpl::forward_directions(const FrameCache& frame,
                                                                   const torch::Tensor& pts,
-                                                                  const torch::Tensor& directions) {
-  const int64_t n = pts.size(0);
-  TORCH_CHECK((directions.dim() == 2 && directions.size(1) == 3) ||
-                  (directions.dim() == 3 && directions.size(1) == n && directions.size(2) == 3),
-              "forward_directions: directions must be (K, 3) or (K, ", n, ", 3), got ",
-              directions.sizes());
+                                                                  const torch::Tensor& dirs) {
+  TORCH_CHECK(dirs.dim() == 3 && dirs.size(1) == pts.size(0) && dirs.size(2) == 3,
+              "forward_directions: directions must be (K, ", pts.size(0), ", 3), got ",
+              dirs.sizes());
   const auto t = trunk(frame, pts);
-  DirectionalRaw out;
-  out.sigma = density(t);
-  const auto d = directions.to(pts.options());
-  out.rgb = colour(frame, t, colour_readout(frame, t),
-                   d.dim() == 2 ? d.unsqueeze(1).expand({d.size(0), n, 3}) : d);
-  return out;
+  return {density(t), colour(frame, t, colour_readout(frame, t), dirs.to(pts.options()))};
 }
 
 torch::Tensor TransHumanImpl::forward_density_first(const FrameCache& frame,

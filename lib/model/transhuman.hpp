@@ -50,16 +50,15 @@ class TransHumanImpl : public torch::nn::Module {
   // extraction). One chunk, as forward.
   torch::Tensor density(const FrameCache& cache, const torch::Tensor& pts);
 
-  // Density and colour of points seen along K directions (baking, METHOD 7.1): the trunk, the
-  // pixel sampling and the colour head's product with e_v run once, the rest of the colour head
-  // once per direction. pts: (N, 3) world, directions: (K, 3), or (K, N, 3) per point, any
-  // length -> sigma_raw (N) and rgb logits (K, N, 3); equal to forward() with each direction.
-  // One chunk, as forward.
+  // Density and colour of points seen along K directions each (baking, METHOD 7.1): the trunk,
+  // the pixel sampling and the colour head's product with e_v run once, the rest of the colour
+  // head per direction. pts (N, 3) world, dirs (K, N, 3) any length -> sigma_raw (N) and rgb
+  // logits (K, N, 3), equal to forward() with each direction. One chunk, as forward.
   struct DirectionalRaw {
     torch::Tensor sigma, rgb;
   };
   DirectionalRaw forward_directions(const FrameCache& cache, const torch::Tensor& pts,
-                                    const torch::Tensor& directions);
+                                    const torch::Tensor& dirs);
 
   // Per-stage wall times are added to `profile` when set (benchmarks; the stage names of
   // render::Profile: encoder, painting, transhe, readouts, dparf, sampling, fdi, heads); null:

@@ -66,14 +66,14 @@ torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool in
 }
 
 torch::Tensor direction_encoding(const torch::Tensor& d) {
-  TORCH_CHECK(d.dim() == 2 && d.size(1) == 3, "directions must be (N, 3), got ", d.sizes());
+  TORCH_CHECK(d.size(-1) == 3, "directions must be (..., 3), got ", d.sizes());
   std::vector<torch::Tensor> parts{d};
   for (double f : {1.0, 2.0, 4.0, 8.0}) {
     const auto x = d * f;
     parts.push_back(torch::sin(x));
     parts.push_back(torch::cos(x));
   }
-  return torch::cat(parts, 1);
+  return torch::cat(parts, -1);
 }
 
 }  // namespace th::model::kernels

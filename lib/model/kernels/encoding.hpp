@@ -28,7 +28,7 @@ torch::Tensor sincos_encoding(const torch::Tensor& x, int64_t num_freqs, bool in
                               bool fused = false);
 
 // View-direction encoding gamma(d) (METHOD 3.4, NeRF's embedder, 4 octaves):
-// d: (N, 3) unit -> (N, 27) = [d, sin d, cos d, sin 2d, cos 2d, sin 4d, cos 4d, sin 8d, cos 8d].
+// d: (..., 3) unit -> (..., 27) = [d, sin d, cos d, sin 2d, cos 2d, ..., sin 8d, cos 8d].
 torch::Tensor direction_encoding(const torch::Tensor& d);
 constexpr int64_t kDirectionEncodingDim = 27;
 

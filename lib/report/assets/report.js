@@ -152,8 +152,9 @@
   // What rendered an evaluation's views (summaries written before it was recorded: exact).
   const rendererOf = (s) => s.renderer || 'exact';
   const MIXED_RENDERERS = 'These scores come from different renderers: a baked score approximates ' +
-    'the exact renderer\'s (the bake fixes each point\'s colour and samples the field on a grid; ' +
-    'docs/METHOD.md, section 7.1), so scores of different renderers are not compared row by row.';
+    'the exact renderer\'s (the bake samples the field on a grid and interpolates between its ' +
+    'points; docs/METHOD.md, section 7.1), so scores of different renderers are not compared row ' +
+    'by row.';
 
   // One table per renderer: scores of the exact renderer and of a bake never share a table.
   function scoresSection(evals) {
