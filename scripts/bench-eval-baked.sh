@@ -9,12 +9,13 @@
 #   3. the paper's identity protocol at 512x512, 64 samples per ray: 438 views, 73 frames of 6
 #      target views (the setting `protocol_438` added to a copy of the split: the 3 unseen people,
 #      every second frame), as ZJU-MoCap's identity set has them; baked 2 cm on all 438; exact fp32
-#      and bf16 on the first TH_BENCH_EXACT_VIEWS views (default 12) and baked 1.5 and 1 cm on the
-#      first 108, each projected to 438 views from its measured times; the baked-minus-exact
-#      difference on the views both scored;
+#      on the first TH_BENCH_EXACT_VIEWS views (default 36), exact bf16 on the first
+#      TH_BENCH_EXACT_BF16_VIEWS (default 12) and baked 1.5 and 1 cm on the first 108, each
+#      projected to 438 views from its measured times; the baked-minus-exact difference on the
+#      views both scored;
 #   4. validation while training: the demo's saved checkpoints ranked by exact and by baked 2 cm
 #      identity scores, and what one validation (train.val_views views) costs each way.
-# Runs for about 35 minutes on 2 cores; measure on an otherwise idle machine.
+# Runs for about 40 minutes on 2 cores; measure on an otherwise idle machine.
 #   scripts/bench-eval-baked.sh [SECTION...]   sections: accuracy speed protocol validation
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,7 +24,8 @@ bash scripts/build.sh transhuman-synth transhuman-train transhuman-eval
 data=data/synthetic
 run=${TH_DEMO_RUN:-runs/demo}
 work=${TH_BENCH_WORK:-runs/bench_eval_baked}
-exact_views=${TH_BENCH_EXACT_VIEWS:-12}
+exact_views=${TH_BENCH_EXACT_VIEWS:-36}
+bf16_views=${TH_BENCH_EXACT_BF16_VIEWS:-12}
 sections=("$@")
 ((${#sections[@]})) || sections=(accuracy speed protocol validation)
 build/apps/transhuman-synth --config configs/synth/default.yaml --out "$data"
@@ -78,7 +80,7 @@ SPLIT
   setting=protocol_438
   p=(data.ratio=1 render.samples=64 "data.split_file=$work/split.yaml")
   evaluate p_exact_fp32 "$ckpt" "${p[@]}" --limit "$exact_views" --precision fp32
-  evaluate p_exact_bf16 "$ckpt" "${p[@]}" --limit "$exact_views" --precision bf16
+  evaluate p_exact_bf16 "$ckpt" "${p[@]}" --limit "$bf16_views" --precision bf16
   evaluate p_baked_0.02 "$ckpt" "${p[@]}" --baked --bake-voxel 0.02
   evaluate p_baked_0.015 "$ckpt" "${p[@]}" --baked --bake-voxel 0.015 --limit 108
   evaluate p_baked_0.01 "$ckpt" "${p[@]}" --baked --bake-voxel 0.01 --limit 108
@@ -93,9 +95,9 @@ if has validation; then
 fi
 echo "end ${sections[*]}	$(load)" >>"$work/load.txt"
 
-/usr/bin/python3 - "$work" "$exact_views" "$(git rev-parse --short HEAD)$(git diff --quiet || echo +)" <<'PY'
+/usr/bin/python3 - "$work" "$exact_views" "$bf16_views" "$(git rev-parse --short HEAD)$(git diff --quiet || echo +)" <<'PY'
 import csv, json, os, statistics, sys, time
-work, exact_views, commit = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+work, exact_views, bf16_views, commit = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), sys.argv[4]
 runs = {}
 for line in open(os.path.join(work, 'runs.tsv')):
     name, seconds, folder = line.rstrip('\n').split('\t')
@@ -204,7 +206,7 @@ if 'p_exact_fp32' in runs:
         out.append(f'| {s["renderer"]} | {prec} | {s["images"]} | {wall:.0f} | {per_view:.2f} | {bake_s} | {march_s} | '
                    f'{wall / 60 if measured else projected / 60:.1f} min{" (measured)" if measured else ""} | {dm} | {dw} | {sm} |')
     out += ['', f'Setting protocol_438: the 3 unseen people, every second frame (24 + 24 + 25 frames), 6 target views each. '
-            f'Exact runs score its first {exact_views} views (2 frames), baked 1.5 and 1 cm its first 108 (18 frames), baked 2 cm all 438. '
+            f'Exact fp32 scores its first {exact_views} views ({exact_views // 6} frames), exact bf16 its first {bf16_views}, baked 1.5 and 1 cm its first 108 (18 frames), baked 2 cm all 438. '
             'Projection of a partial run: its rows\' seconds scaled to 438 views plus the rest of its wall time as it was (exact), '
             'or its whole wall time scaled by 438 / views (baked: frames and views grow alike). A baked row\'s seconds on a '
             'frame\'s first view hold the frame\'s preparation (encoder, painting, TransHE at 512x512) and its bake; "bake per '

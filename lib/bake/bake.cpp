@@ -216,13 +216,12 @@ BakedFrame bake_frame(const inference::Session& session, const inference::Prepar
   fine.view({-1}).index_put_({flat(fine_index)}, density(positions(fine_index, out.origin, h)));
   rep.seconds["fine"] = since(start);
 
-  // 3. Colour where a ray can see it: along the six axis directions, or from each eye.
+  // 3. Colour at the points with positive density, the only ones the march weighs (METHOD 7.1):
+  // along the six axis directions, or from each eye.
   start = Clock::now();
   out.eyes = options.eyes;
   const int sets = out.color_sets();
-  const auto pos = fine > 0;
-  const auto color_mask = dilate(pos, 1);
-  const auto color_index = color_mask.nonzero();
+  const auto color_index = (fine > 0).nonzero();
   rep.color_points = color_index.size(0);
   planned = done + 2.0 * double(rep.color_points);  // a colour point costs about two
   const auto directions = torch::tensor({1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0,

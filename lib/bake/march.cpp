@@ -6,7 +6,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <limits>
+
+#include "data/rays.hpp"
 
 namespace th::bake {
 namespace {
@@ -49,61 +50,49 @@ class Grid {
     return true;
   }
 
-  // Trilinear interpolation of `dims` values at `data` of each lattice point (`stride` floats
-  // per point), into out[dims].
-  void interpolate(const float* data, int stride, int dims, const Location& at, float* out) const {
-    const int64_t dx = P_ * P_, dy = P_;
-    const float wx[2] = {1 - at.fx, at.fx}, wy[2] = {1 - at.fy, at.fy}, wz[2] = {1 - at.fz, at.fz};
-    for (int c = 0; c < dims; ++c) out[c] = 0;
-    for (int a = 0; a < 2; ++a)
-      for (int b = 0; b < 2; ++b)
-        for (int c = 0; c < 2; ++c) {
-          const float weight = wx[a] * wy[b] * wz[c];
-          const float* v = data + (at.base + a * dx + b * dy + c) * stride;
-          for (int d = 0; d < dims; ++d) out[d] += weight * v[d];
-        }
+  // Trilinear interpolation of the density at `at`.
+  float density(const Location& at) const {
+    float out = 0;
+    for_corners(at,
+                [&](int64_t point, float weight) { out += weight * f_.density[size_t(point)]; });
+    return out;
+  }
+
+  // The colour at `at`: the corners' colours (`dims` floats at `data` of each lattice point,
+  // `stride` per point) weighted by their trilinear weights times their positive density, as
+  // compositing weighs them; corners outside the body (density <= 0) have no say. Into out[dims];
+  // false when no corner has positive density.
+  bool color(const float* data, int stride, int dims, const Location& at, float* out) const {
+    float total = 0;
+    for (int d = 0; d < dims; ++d) out[d] = 0;
+    for_corners(at, [&](int64_t point, float weight) {
+      const float w = weight * std::max(f_.density[size_t(point)], 0.0f);
+      if (!(w > 0)) return;
+      total += w;
+      const float* v = data + point * stride;
+      for (int d = 0; d < dims; ++d) out[d] += w * v[d];
+    });
+    if (!(total > 0)) return false;
+    for (int d = 0; d < dims; ++d) out[d] /= total;
+    return true;
   }
 
  private:
+  // fn(lattice point, trilinear weight) for the 8 corners of `at`'s cell.
+  template <class Fn>
+  void for_corners(const Location& at, Fn&& fn) const {
+    const int64_t dx = P_ * P_, dy = P_;
+    const float wx[2] = {1 - at.fx, at.fx}, wy[2] = {1 - at.fy, at.fy}, wz[2] = {1 - at.fz, at.fz};
+    for (int a = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b)
+        for (int c = 0; c < 2; ++c) fn(at.base + a * dx + b * dy + c, wx[a] * wy[b] * wz[c]);
+  }
+
   const BakedFrame& f_;
   double inv_;
   std::array<int64_t, 3> nb_;
   int64_t P_, P3_;
 };
-
-// near/far of a ray against the box padded by 0.01, as data::near_far computes them: tiny
-// direction components become +1e-5, the ray is valid when exactly two of the six plane points
-// lie in the box (+-1e-6), near/far are their distances from the origin over |d|.
-bool near_far(const double o[3], const double d_in[3], const std::array<double, 6>& box,
-              double& near, double& far) {
-  double d[3], lo[3], hi[3];
-  for (int a = 0; a < 3; ++a) {
-    d[a] = std::abs(d_in[a]) < 1e-5 ? 1e-5 : d_in[a];
-    lo[a] = box[a] - 0.01;
-    hi[a] = box[3 + a] + 0.01;
-  }
-  const double norm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-  int inside = 0;
-  near = std::numeric_limits<double>::infinity();
-  far = -near;
-  for (int plane = 0; plane < 6; ++plane) {
-    const int axis = plane % 3;
-    const double t = ((plane < 3 ? lo[axis] : hi[axis]) - o[axis]) / d[axis];
-    double p[3], sq = 0;
-    bool in = true;
-    for (int a = 0; a < 3; ++a) {
-      p[a] = t * d[a] + o[a];
-      in = in && p[a] >= lo[a] - 1e-6 && p[a] <= hi[a] + 1e-6;
-      sq += (p[a] - o[a]) * (p[a] - o[a]);
-    }
-    if (!in) continue;
-    ++inside;
-    const double dist = std::sqrt(sq) / norm;
-    near = std::min(near, dist);
-    far = std::max(far, dist);
-  }
-  return inside == 2;
-}
 
 }  // namespace
 
@@ -158,7 +147,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
         const double d[3] = {a[0] * x + a[1] * y + a[2], a[3] * x + a[4] * y + a[5],
                              a[6] * x + a[7] * y + a[8]};
         double near = 0, far = 0;
-        if (!near_far(o, d, frame.box, near, far)) continue;
+        if (!data::near_far_ray(o, d, frame.box, near, far)) continue;
         ++n_rays;
         const double norm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
         double trans = 1, r = 0, g = 0, b = 0, z_sum = 0, w_sum = 0;
@@ -170,8 +159,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           Location at;
           if (!grid.locate(p, at)) continue;
           ++n_occupied;
-          float sigma = 0;
-          grid.interpolate(frame.density.data(), 1, 1, at, &sigma);
+          const float sigma = grid.density(at);
           if (!(sigma > 0)) continue;
           const double delta =
               (i + 1 < S
@@ -181,7 +169,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           const double alpha = 1 - std::exp(-double(sigma) * delta);
           const double weight = alpha * trans;
           float col[kColorDims];
-          grid.interpolate(color, color_stride, kColorDims, at, col);
+          grid.color(color, color_stride, kColorDims, at, col);
           r += weight * std::clamp(col[0], 0.0f, 1.0f);
           g += weight * std::clamp(col[1], 0.0f, 1.0f);
           b += weight * std::clamp(col[2], 0.0f, 1.0f);

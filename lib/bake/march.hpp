@@ -1,10 +1,11 @@
 #pragma once
 // Rendering a baked frame (METHOD 7.1): every pixel's ray, its near/far against the frame's box,
 // and its samples exactly as the exact renderer makes them (METHOD 2.2, 4), but each sample's
-// density and colour interpolated trilinearly from the grid instead of asked of the network;
-// the same compositing, black background, and early termination once the transmittance falls
-// below a bound. Rows are shared among the intra-op threads (at::parallel_for), a band of rows
-// at a time, so that a caller can stop a long march between bands.
+// density interpolated trilinearly from the grid, and its colour weighted by the corners'
+// positive density, instead of asked of the network; the same compositing, black background, and
+// early termination once the transmittance falls below a bound. Rows are shared among the intra-op
+// threads (at::parallel_for), a band of rows at a time, so that a caller can stop a long march
+// between bands.
 
 #include <torch/types.h>
 

@@ -1,5 +1,7 @@
 #include "data/rays.hpp"
 
+#include <algorithm>
+#include <cmath>
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
@@ -40,33 +42,59 @@ RayBundle pixel_rays(const torch::Tensor& pixels, const torch::Tensor& K, const 
   return {origin.reshape({1, 3}).expand({pixels.size(0), 3}).contiguous(), dirs};
 }
 
+bool near_far_ray(const double o[3], const double d_in[3], const std::array<double, 6>& box,
+                  double& near, double& far) {
+  double d[3], lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    d[a] = std::abs(d_in[a]) < 1e-5 ? 1e-5 : d_in[a];  // tiny components, of either sign
+    lo[a] = box[a] - 0.01;
+    hi[a] = box[3 + a] + 0.01;
+  }
+  const double norm = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  constexpr double eps = 1e-6;
+  int inside = 0;
+  near = std::numeric_limits<double>::infinity();
+  far = -near;
+  // The 6 planes: min x, y, z, then max x, y, z.
+  for (int plane = 0; plane < 6; ++plane) {
+    const int axis = plane % 3;
+    const double t = ((plane < 3 ? lo[axis] : hi[axis]) - o[axis]) / d[axis];
+    double p[3], sq = 0;
+    bool in = true;
+    for (int a = 0; a < 3; ++a) {
+      p[a] = t * d[a] + o[a];
+      in = in && p[a] >= lo[a] - eps && p[a] <= hi[a] + eps;
+      sq += (p[a] - o[a]) * (p[a] - o[a]);
+    }
+    if (!in) continue;
+    ++inside;
+    const double dist = std::sqrt(sq) / norm;
+    near = std::min(near, dist);
+    far = std::max(far, dist);
+  }
+  if (inside == 2) return true;
+  near = far = 0;
+  return false;
+}
+
 NearFar near_far(const torch::Tensor& origins, const torch::Tensor& dirs,
                  const torch::Tensor& box) {
   TORCH_CHECK(origins.dim() == 2 && origins.size(1) == 3, "origins must be (N, 3)");
   TORCH_CHECK(dirs.sizes() == origins.sizes(), "dirs must be (N, 3) like origins");
   TORCH_CHECK(box.sizes() == torch::IntArrayRef({2, 3}), "box must be (2, 3)");
-  const auto o = f64(origins);
-  auto d = f64(dirs).clone();
-  const auto padded = f64(box) + torch::tensor({-0.01, 0.01}, torch::kFloat64).reshape({2, 1});
-  // Reference behaviour: tiny components (of either sign) become +1e-5.
-  d.masked_fill_(d.abs() < 1e-5, 1e-5);
-
-  // Distances to the 6 planes (min x, y, z then max x, y, z): (N, 6).
-  const auto t = ((padded.unsqueeze(0) - o.unsqueeze(1)) / d.unsqueeze(1)).reshape({-1, 6});
-  const auto p = t.unsqueeze(-1) * d.unsqueeze(1) + o.unsqueeze(1);  // (N, 6, 3)
-  const double eps = 1e-6;
-  const auto lo = padded[0] - eps, hi = padded[1] + eps;
-  const auto inside = ((p >= lo) & (p <= hi)).all(-1);  // (N, 6)
-  const auto valid = inside.sum(-1) == 2;
-
-  // Distances from the origin to the plane points, in units of |d|; for a valid ray exactly two
-  // of them are inside, and near/far are their min and max.
-  const auto dist = (p - o.unsqueeze(1)).norm(2, 2) / d.norm(2, 1, /*keepdim=*/true);  // (N, 6)
-  const double inf = std::numeric_limits<double>::infinity();
-  const auto near = std::get<0>(dist.masked_fill(inside.logical_not(), inf).min(1));
-  const auto far = std::get<0>(dist.masked_fill(inside.logical_not(), -inf).max(1));
-  const auto zero = torch::zeros_like(near);
-  return {torch::where(valid, near, zero), torch::where(valid, far, zero), valid};
+  const auto o = f64(origins), d = f64(dirs), b = f64(box);
+  std::array<double, 6> bounds{};
+  std::copy(b.data_ptr<double>(), b.data_ptr<double>() + 6, bounds.begin());
+  const int64_t n = o.size(0);
+  NearFar out{torch::zeros({n}, torch::kFloat64), torch::zeros({n}, torch::kFloat64),
+              torch::zeros({n}, torch::kBool)};
+  const double *po = o.data_ptr<double>(), *pd = d.data_ptr<double>();
+  double *near = out.near.data_ptr<double>(), *far = out.far.data_ptr<double>();
+  bool* valid = out.valid.data_ptr<bool>();
+  // One thread: the loader's workers call this beside the renderer's threads.
+  for (int64_t i = 0; i < n; ++i)
+    valid[i] = near_far_ray(po + 3 * i, pd + 3 * i, bounds, near[i], far[i]);
+  return out;
 }
 
 cv::Mat box_mask(const torch::Tensor& box, const torch::Tensor& K, const torch::Tensor& R,

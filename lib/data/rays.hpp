@@ -4,6 +4,7 @@
 
 #include <torch/types.h>
 
+#include <array>
 #include <cstdint>
 #include <opencv2/core.hpp>
 #include <random>
@@ -39,6 +40,10 @@ struct NearFar {
   torch::Tensor valid;
 };
 NearFar near_far(const torch::Tensor& origins, const torch::Tensor& dirs, const torch::Tensor& box);
+// One ray of near_far: origin o, direction d, box {min x, y, z, max x, y, z} (unpadded). False
+// (near = far = 0) when the ray misses the box.
+bool near_far_ray(const double o[3], const double d[3], const std::array<double, 6>& box,
+                  double& near, double& far);
 
 // The box's silhouette: project the 8 corners, fill the 6 faces. CV_8U, 1 inside.
 cv::Mat box_mask(const torch::Tensor& box, const torch::Tensor& K, const torch::Tensor& R,

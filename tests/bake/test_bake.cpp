@@ -24,14 +24,17 @@ using th::bake::BakedFrame;
 
 namespace {
 
-// Density a + b.p and colour c0 + C p: linear in the position, so that a grid holding them at
-// its lattice points gives them exactly anywhere by trilinear interpolation.
+// Density a + b.p, and colour c0 + C p / sigma(p): the density and the density times the colour
+// are linear in the position, so that a grid holding them at its lattice points gives them
+// exactly anywhere the density is positive, by trilinear interpolation of the density and the
+// density-weighted interpolation of the colour (METHOD 7.1); with C = 0 the colour is one
+// everywhere and the density may cross zero.
 struct LinearField {
   double a = -2.0, b[3] = {3.0, 1.0, 2.0};
-  double c0[3] = {0.5, 0.4, 0.6}, C[3][3] = {{0.1, 0, 0}, {0, -0.1, 0.05}, {0.05, 0.05, 0}};
+  double c0[3] = {0.5, 0.4, 0.6}, C[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
   double sigma(const double p[3]) const { return a + b[0] * p[0] + b[1] * p[1] + b[2] * p[2]; }
   double color(int ch, const double p[3]) const {
-    return c0[ch] + C[ch][0] * p[0] + C[ch][1] * p[1] + C[ch][2] * p[2];
+    return c0[ch] + (C[ch][0] * p[0] + C[ch][1] * p[1] + C[ch][2] * p[2]) / sigma(p);
   }
 };
 
@@ -43,11 +46,12 @@ class LinearRadiance : public th::render::RadianceField {
     const auto p = pts.to(torch::kFloat64);
     auto out = torch::zeros({p.size(0), 4}, torch::kFloat64);
     const auto x = p.select(1, 0), y = p.select(1, 1), z = p.select(1, 2);
+    const auto sigma = f_.a + f_.b[0] * x + f_.b[1] * y + f_.b[2] * z;
     for (int ch = 0; ch < 3; ++ch) {
-      const auto c = f_.c0[ch] + f_.C[ch][0] * x + f_.C[ch][1] * y + f_.C[ch][2] * z;
+      const auto c = f_.c0[ch] + (f_.C[ch][0] * x + f_.C[ch][1] * y + f_.C[ch][2] * z) / sigma;
       out.select(1, ch).copy_(torch::log(c / (1 - c)));
     }
-    out.select(1, 3).copy_(f_.a + f_.b[0] * x + f_.b[1] * y + f_.b[2] * z);
+    out.select(1, 3).copy_(sigma);
     return out.to(pts.scalar_type());
   }
 
@@ -56,7 +60,7 @@ class LinearRadiance : public th::render::RadianceField {
 };
 
 // A grid over `box` (padded by 0.01 as the bake pads it) holding `field` at every lattice point,
-// every brick stored.
+// every brick stored; colour where the density is positive, black elsewhere (as a bake leaves it).
 BakedFrame linear_grid(const LinearField& field, const std::array<double, 6>& box, double voxel,
                        int brick) {
   BakedFrame g;
@@ -81,8 +85,10 @@ BakedFrame linear_grid(const LinearField& field, const std::array<double, 6>& bo
               const double p[3] = {g.origin[0] + double(bi * brick + i) * voxel,
                                    g.origin[1] + double(bj * brick + j) * voxel,
                                    g.origin[2] + double(bk * brick + k) * voxel};
-              g.density.push_back(float(field.sigma(p)));
-              for (int ch = 0; ch < 3; ++ch) g.color.push_back(float(field.color(ch, p)));
+              const double sigma = field.sigma(p);
+              g.density.push_back(float(sigma));
+              for (int ch = 0; ch < 3; ++ch)
+                g.color.push_back(sigma > 0 ? float(field.color(ch, p)) : 0.0f);
             }
       }
   return g;
@@ -92,7 +98,13 @@ BakedFrame linear_grid(const LinearField& field, const std::array<double, 6>& bo
 
 TEST_CASE("the march of a grid equals the exact renderer on a field the grid holds exactly",
           "[bake]") {
-  const LinearField field;
+  // One colour and a density crossing zero: the black of the points outside the body must not
+  // show. Then a positive density and a colour varying with it.
+  LinearField varying;
+  varying.a = 0.5;  // sigma >= 0.9 in the box
+  varying.C[0][0] = 0.1, varying.C[1][1] = -0.1, varying.C[1][2] = 0.05;
+  varying.C[2][0] = 0.05, varying.C[2][1] = 0.05;
+  const auto field = GENERATE_COPY(LinearField{}, varying);
   const std::array<double, 6> box{-0.3, -0.2, 0.8, 0.25, 0.35, 1.3};
   const auto grid = linear_grid(field, box, 0.05, 4);  // several bricks per axis
   // A camera at the origin looking down +z, a 24 x 20 image.
