@@ -17,6 +17,7 @@
 #      identity scores, and what one validation (train.val_views views) costs each way.
 # Runs for about 40 minutes on 2 cores; measure on an otherwise idle machine.
 #   scripts/bench-eval-baked.sh [SECTION...]   sections: accuracy speed protocol validation
+#   (`report` alone: write the report again from the runs already made)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install-deps.sh
@@ -39,7 +40,7 @@ mkdir -p "$work"
 log=$work/runs.tsv
 touch "$log"
 load() { cut -d' ' -f1-3 /proc/loadavg; }
-echo "start ${sections[*]}	$(load)" >>"$work/load.txt"
+[[ "${sections[*]}" == report ]] || echo "start ${sections[*]}	$(load)" >>"$work/load.txt"
 setting=identity
 
 # evaluate NAME CHECKPOINT [transhuman-eval options and overrides...]: one timed evaluation.
@@ -93,7 +94,7 @@ if has validation; then
     evaluate "v_baked_$e" "$c" --baked
   done
 fi
-echo "end ${sections[*]}	$(load)" >>"$work/load.txt"
+[[ "${sections[*]}" == report ]] || echo "end ${sections[*]}	$(load)" >>"$work/load.txt"
 
 /usr/bin/python3 - "$work" "$exact_views" "$bf16_views" "$(git rev-parse --short HEAD)$(git diff --quiet || echo +)" <<'PY'
 import csv, json, os, statistics, sys, time
@@ -205,6 +206,11 @@ if 'p_exact_fp32' in runs:
         measured = len(r) == 438
         out.append(f'| {s["renderer"]} | {prec} | {s["images"]} | {wall:.0f} | {per_view:.2f} | {bake_s} | {march_s} | '
                    f'{wall / 60 if measured else projected / 60:.1f} min{" (measured)" if measured else ""} | {dm} | {dw} | {sm} |')
+    if 'p_exact_bf16' in runs:
+        both = [k for k in rows('p_exact_bf16') if k in rows('p_exact_fp32')]
+        seconds = {n: statistics.fmean(num(rows(n)[k]['seconds']) for k in both) for n in ('p_exact_fp32', 'p_exact_bf16')}
+        out += ['', f'Exact fp32 and bf16 on the {len(both)} views both scored: {seconds["p_exact_fp32"]:.2f} and '
+                f'{seconds["p_exact_bf16"]:.2f} s per view (rows).']
     out += ['', f'Setting protocol_438: the 3 unseen people, every second frame (24 + 24 + 25 frames), 6 target views each. '
             f'Exact fp32 scores its first {exact_views} views ({exact_views // 6} frames), exact bf16 its first {bf16_views}, baked 1.5 and 1 cm its first 108 (18 frames), baked 2 cm all 438. '
             'Projection of a partial run: its rows\' seconds scaled to 438 views plus the rest of its wall time as it was (exact), '
