@@ -50,44 +50,50 @@ class Grid {
     return true;
   }
 
-  // Trilinear interpolation of the density at `at`.
-  float density(const Location& at) const {
+  // The 8 lattice points of `at`'s cell and their trilinear weights.
+  struct Corners {
+    int64_t point[8];
+    float weight[8];
+  };
+  Corners corners(const Location& at) const {
+    const int64_t dx = P_ * P_, dy = P_;
+    const float wx[2] = {1 - at.fx, at.fx}, wy[2] = {1 - at.fy, at.fy}, wz[2] = {1 - at.fz, at.fz};
+    Corners c{};
+    for (int a = 0, i = 0; a < 2; ++a)
+      for (int b = 0; b < 2; ++b)
+        for (int k = 0; k < 2; ++k, ++i) {
+          c.point[i] = at.base + a * dx + b * dy + k;
+          c.weight[i] = wx[a] * wy[b] * wz[k];
+        }
+    return c;
+  }
+
+  // Trilinear interpolation of the density.
+  float density(const Corners& c) const {
     float out = 0;
-    for_corners(at,
-                [&](int64_t point, float weight) { out += weight * f_.density[size_t(point)]; });
+    for (int i = 0; i < 8; ++i) out += c.weight[i] * f_.density[size_t(c.point[i])];
     return out;
   }
 
-  // The colour at `at`: the corners' colours (`dims` floats at `data` of each lattice point,
-  // `stride` per point) weighted by their trilinear weights times their positive density, as
-  // compositing weighs them; corners outside the body (density <= 0) have no say. Into out[dims];
-  // false when no corner has positive density.
-  bool color(const float* data, int stride, int dims, const Location& at, float* out) const {
+  // The colour: the corners' colours (`dims` floats at `data` of each lattice point, `stride` per
+  // point) weighted by their trilinear weights times their positive density, as compositing
+  // weighs them; corners outside the body (density <= 0) have no say. Into out[dims]; black when
+  // no corner has positive density.
+  void color(const Corners& c, const float* data, int stride, int dims, float* out) const {
     float total = 0;
     for (int d = 0; d < dims; ++d) out[d] = 0;
-    for_corners(at, [&](int64_t point, float weight) {
-      const float w = weight * std::max(f_.density[size_t(point)], 0.0f);
-      if (!(w > 0)) return;
+    for (int i = 0; i < 8; ++i) {
+      const float w = c.weight[i] * std::max(f_.density[size_t(c.point[i])], 0.0f);
+      if (!(w > 0)) continue;
       total += w;
-      const float* v = data + point * stride;
+      const float* v = data + c.point[i] * stride;
       for (int d = 0; d < dims; ++d) out[d] += w * v[d];
-    });
-    if (!(total > 0)) return false;
-    for (int d = 0; d < dims; ++d) out[d] /= total;
-    return true;
+    }
+    if (total > 0)
+      for (int d = 0; d < dims; ++d) out[d] /= total;
   }
 
  private:
-  // fn(lattice point, trilinear weight) for the 8 corners of `at`'s cell.
-  template <class Fn>
-  void for_corners(const Location& at, Fn&& fn) const {
-    const int64_t dx = P_ * P_, dy = P_;
-    const float wx[2] = {1 - at.fx, at.fx}, wy[2] = {1 - at.fy, at.fy}, wz[2] = {1 - at.fz, at.fz};
-    for (int a = 0; a < 2; ++a)
-      for (int b = 0; b < 2; ++b)
-        for (int c = 0; c < 2; ++c) fn(at.base + a * dx + b * dy + c, wx[a] * wy[b] * wz[c]);
-  }
-
   const BakedFrame& f_;
   double inv_;
   std::array<int64_t, 3> nb_;
@@ -159,7 +165,8 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           Location at;
           if (!grid.locate(p, at)) continue;
           ++n_occupied;
-          const float sigma = grid.density(at);
+          const auto corners = grid.corners(at);
+          const float sigma = grid.density(corners);
           if (!(sigma > 0)) continue;
           const double delta =
               (i + 1 < S
@@ -169,7 +176,7 @@ std::optional<BakedImages> render_baked(const BakedFrame& frame, const torch::Te
           const double alpha = 1 - std::exp(-double(sigma) * delta);
           const double weight = alpha * trans;
           float col[kColorDims];
-          grid.color(color, color_stride, kColorDims, at, col);
+          grid.color(corners, color, color_stride, kColorDims, col);
           r += weight * std::clamp(col[0], 0.0f, 1.0f);
           g += weight * std::clamp(col[1], 0.0f, 1.0f);
           b += weight * std::clamp(col[2], 0.0f, 1.0f);
