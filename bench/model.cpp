@@ -9,6 +9,7 @@
 // the paths see the same machine state.
 // Memory: peak resident set size of the process during the measured section, minus the
 // resident size before it (Linux VmHWM after resetting it through /proc/self/clear_refs).
+#include <ATen/Parallel.h>
 #include <malloc.h>
 #include <torch/csrc/autograd/profiler_legacy.h>
 #include <torch/torch.h>
@@ -21,7 +22,6 @@
 #include <iomanip>
 #include <iostream>
 #include <map>
-#include <set>
 #include <sstream>
 #include <thread>
 
@@ -31,6 +31,7 @@
 #include "core/files.hpp"
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
+#include "model/kernels/onednn_linear.hpp"
 #include "model/transhuman.hpp"
 #include "pipeline/pipeline.hpp"
 #include "render/progressive.hpp"
@@ -179,39 +180,25 @@ torch::Tensor body_points(const Scene& s, const render::BodyDistance& body, int6
 
 using bench::Report;
 
-// Paper-form floating-point operations per point of each per-point forward stage (METHOD 3.3,
-// 3.4), counted from the model's own weights: 2 x in x out per linear layer and application (per
-// reference view, or once after the mean over views), DPaRF's distances to the token centres and
-// its weighted sum over the Nk fields, FDI's attention over the V views; sampling: bilinear
-// reads of the pixel features (4 taps, a multiply and an add each). The fast paths do less work
-// than this (folded weights, fc_0 applied to the tokens), so the rate derived from it is the
-// paper-form work done per second.
-std::map<std::string, double> stage_flops(model::TransHuman& net, const ModelConfig& mc,
-                                          int64_t V) {
-  std::map<std::string, double> f;
-  const std::set<std::string> once{"heads.fc_3", "heads.alpha_fc", "heads.fc_4", "heads.rgb_fc"};
-  int64_t fc0_in = 0, pixel_channels = 0;
-  for (const auto& p : net->named_parameters()) {
-    const std::string& name = p.key();
-    const auto& w = p.value();
-    const std::string suffix = ".weight";
-    if (w.dim() != 2 || name.size() <= suffix.size() ||
-        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0)
-      continue;
-    const std::string layer = name.substr(0, name.size() - suffix.size());
-    std::string stage;
-    if (layer.rfind("fdi.", 0) == 0) stage = "fdi";
-    if (layer.rfind("heads.", 0) == 0) stage = "heads";
-    if (layer == "human.fc_0") stage = "dparf", fc0_in = w.size(1);
-    if (layer == "fdi.alpha_res_0") pixel_channels = w.size(1);
-    if (!stage.empty())
-      f[stage] += 2.0 * double(w.size(0) * w.size(1)) * (once.count(layer) ? 1 : V);
+// Memory bandwidth in GB/s: a stream triad a = b + s c over three 64 MiB float arrays on the
+// LibTorch threads, best of the repetitions in about half a second (12 bytes per element:
+// two reads and a write, the write-allocate read not counted, as STREAM counts).
+double stream_bandwidth() {
+  const int64_t n = int64_t(1) << 24;
+  std::vector<float> a(n), b(n, 1.0f), c(n, 2.0f);
+  double best = 0;
+  const auto t0 = Clock::now();
+  while (seconds_since(t0) < 0.5) {
+    const auto t = Clock::now();
+    at::parallel_for(0, n, 1 << 16, [&](int64_t lo, int64_t hi) {
+      float* __restrict pa = a.data();
+      const float* __restrict pb = b.data();
+      const float* __restrict pc = c.data();
+      for (int64_t i = lo; i < hi; ++i) pa[i] = pb[i] + 3.0f * pc[i];
+    });
+    best = std::max(best, 12.0 * double(n) / seconds_since(t) / 1e9);
   }
-  const double nk = mc.dparf.nk, nt = mc.grouping.num_tokens;
-  f["dparf"] += 9 * nt + 2 * V * nk * double(fc0_in);  // distances; weighted sum of the fields
-  f["fdi"] += 2.0 * V * V * (128 + 256);               // q k^T and the attention times u
-  f["sampling"] = 8.0 * double(pixel_channels) * V;    // bilinear reads of p_v
-  return f;
+  return best;
 }
 
 // GFLOP/s of the product the model's linear layers run under `products`: a (rows, 256) by
@@ -576,18 +563,25 @@ int run(int argc, char** argv) {
       r.line("Forward time per stage:");
       for (const auto& l : stage_lines) r.line("- " + l);
       r.line("");
-      // Roofline per stage at each precision's fastest chunk: the paper-form work per point,
-      // the rate it was done at, and the limit of the product the layers run on, measured now.
-      const auto flops = stage_flops(net, mc, scene.in.ref_images.size(0));
+      // Roofline per stage at each precision's fastest chunk: the work the running form counts
+      // (render::count_work), against the product limit and the memory bandwidth measured now.
+      const double bandwidth = stream_bandwidth();
       r.line(
-          "Roofline of the forward stages (each precision at its fastest chunk; FLOP/point in "
-          "the paper's form, counted from the weights; limit: the layers' product, (rows, "
-          "256) x (256, 256) at the chunk's rows, measured in this run):");
+          "Roofline of the forward stages (each precision at its fastest chunk). FLOP and bytes "
+          "per point are what the running form's operations count as they run: products at "
+          "their real (folded) shapes, 2 M K N; the kernels' and the remaining elementwise "
+          "operations' arithmetic, a transcendental function as one; bytes: compulsory traffic, "
+          "each operand read once and each result written once, a gathered table at most once. "
+          "Limits measured in this run: the product limit, a (rows, 256) x (256, 256) product at "
+          "the chunk's rows in the path's precision; memory bandwidth, a stream triad " +
+          fmt(bandwidth, 1) +
+          " GB/s. Bound: memory where the stage's intensity times the bandwidth is below the "
+          "product limit; share: the achieved rate over the bound's rate.");
       r.line("");
       r.line(
-          "| precision | form | chunk | stage | FLOP/point | seconds | GFLOP/s | limit GFLOP/s | "
-          "of limit |");
-      r.line("|---|---|---|---|---|---|---|---|---|");
+          "| precision | chunk | stage | kFLOP/point | bytes/point | FLOP/byte | seconds | "
+          "GFLOP/s | GB/s | product limit GFLOP/s | bound | share of bound |");
+      r.line("|---|---|---|---|---|---|---|---|---|---|---|---|");
       for (size_t path = 0; path < precisions.size(); ++path) {
         const Cell* fastest = nullptr;
         int64_t chunk = 0;
@@ -597,25 +591,34 @@ int run(int argc, char** argv) {
         if (!fastest) continue;
         const auto products = products_of(precisions[path]);
         const double limit = product_limit(products, chunk * scene.in.ref_images.size(0));
-        const std::pair<const char*, std::pair<const render::Profile*, double>> forms[] = {
-            {"fast", {&fastest->profile, fastest->fwd * fastest->fwd_s}}};
-        for (const auto& [form, measured] : forms)
-          for (const auto& [stage, per_point] : flops) {
-            const auto it = measured.first->seconds.find(stage);
-            if (it == measured.first->seconds.end() || it->second <= 0) continue;
-            const double rate = per_point * measured.second / it->second / 1e9;
-            r.line("| " + precisions[path] + " | " + form + " | " + std::to_string(chunk) + " | " +
-                   stage + " | " + fmt(per_point, 0) + " | " + fmt(it->second, 2) + " | " +
-                   fmt(rate, 1) + " | " + fmt(limit, 1) + " | " + fmt(100 * rate / limit, 0) +
-                   "% |");
-          }
+        const double points = fastest->fwd * fastest->fwd_s;
+        for (const auto& [stage, sec] : fastest->profile.seconds) {
+          const auto it = fastest->profile.work.find(stage);
+          if (sec <= 0 || it == fastest->profile.work.end()) continue;
+          const auto& w = it->second;
+          const double intensity = w.bytes > 0 ? w.flops / w.bytes : 0;
+          const bool memory = intensity * bandwidth < limit;
+          const double gflops = w.flops / sec / 1e9, gbytes = w.bytes / sec / 1e9;
+          const double share = memory ? gbytes / bandwidth : gflops / limit;
+          r.line("| " + precisions[path] + " | " + std::to_string(chunk) + " | " + stage + " | " +
+                 fmt(w.flops / points / 1e3, 1) + " | " + fmt(w.bytes / points, 0) + " | " +
+                 fmt(intensity, 2) + " | " + fmt(sec, 2) + " | " + fmt(gflops, 1) + " | " +
+                 fmt(gbytes, 1) + " | " + fmt(limit, 1) + " | " + (memory ? "memory" : "products") +
+                 " | " + fmt(100 * share, 0) + "% |");
+        }
       }
-      r.line("");
-      r.line(
-          "fast: the form that runs (folded weights, readouts, fc_0 on the tokens, METHOD 9), "
-          "which does less than the paper-form work, so its GFLOP/s is paper-form work per second "
-          "and may exceed the limit. Sampling reads memory and does no products: the product's "
-          "limit is not its limit.");
+      {
+        model::Products onednn16, libtorch16;
+        onednn16.precision = libtorch16.precision = model::Precision::bf16;
+        onednn16.onednn = true;
+        const int64_t rows = chunks.front() * scene.in.ref_images.size(0);
+        r.line("");
+        r.line("bf16 products of (" + std::to_string(rows) +
+               ", 256) x (256, 256) in this run: oneDNN's inner-product primitive " +
+               fmt(product_limit(onednn16, rows), 1) + " GFLOP/s" +
+               (model::kernels::onednn_bf16() ? "" : " (not in this build: LibTorch's linear)") +
+               ", LibTorch's bf16 linear " + fmt(product_limit(libtorch16, rows), 1) + " GFLOP/s.");
+      }
       r.line("");
     }
   }

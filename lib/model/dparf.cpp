@@ -71,14 +71,15 @@ torch::Tensor TokenFieldsImpl::forward(const HumanStage& human, const torch::Ten
     g = kernels::weighted_codes(fields);
   else if (dparf.coordinate == Coordinate::absolute)
     g = kernels::sincos_encoding(xs, dparf.pe_freqs, true, fused);  // PE(xs), the same for every k
-  auto s =
-      kernels::weighted_gather(stage.table, {fields.index, fields.weight}, stage.table_grad_sink)
-          .view({xs.size(0), -1, 256});
-  if (g.defined()) {  // fc_0's coordinate part
+  kernels::GatherEpilogue epilogue{{}, true, products.between(stage.table.scalar_type())};
+  if (g.defined()) {  // fc_0's coordinate part, added to every view's row
     const auto& w = fc_0->weight;
-    s.add_(products.linear_fp32(g, w.narrow(1, w.size(1) - g.size(1), g.size(1))).unsqueeze(1));
+    epilogue.addend = products.linear_fp32(g, w.narrow(1, w.size(1) - g.size(1), g.size(1)));
   }
-  return s.relu_();
+  // s_v = relu(table rows + coordinate part), in the type FDI's products read
+  return kernels::weighted_gather(stage.table, {fields.index, fields.weight}, stage.table_grad_sink,
+                                  epilogue)
+      .view({xs.size(0), -1, 256});
 }
 
 std::shared_ptr<HumanRepresentation> make_human_representation(const ModelConfig& config) {

@@ -21,8 +21,9 @@ class HumanRepresentation : public torch::nn::Module {
  public:
   // The per-frame part: the painted body -> the human stage of the frame state.
   virtual HumanStage prepare(const FrameInputs& in, const PaintedBody& body) = 0;
-  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256) fp32. `stage` is
-  // what prepare() made; `products` run the per-point products.
+  // The per-point part. xs: (N, 3) points in the SMPL frame -> s: (N, V, 256), fp32 or the type
+  // products.between(fp32) names (only products read s). `stage` is what prepare() made;
+  // `products` run the per-point products.
   virtual torch::Tensor forward(const HumanStage& stage, const torch::Tensor& xs,
                                 const Products& products) = 0;
 };

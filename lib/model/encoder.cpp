@@ -4,6 +4,7 @@
 
 #include "core/error.hpp"
 #include "io/npy.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model {
 namespace {
@@ -211,7 +212,9 @@ Taps PixelGeometry::image_taps(const torch::Tensor& uv, const torch::Tensor& vie
 std::pair<torch::Tensor, torch::Tensor> PixelGeometry::point_view_rows(const torch::Tensor& uv) {
   const auto n = uv.size(0), V = uv.size(1);
   const auto options = torch::TensorOptions().dtype(torch::kLong).device(uv.device());
-  return {uv.reshape({-1, 2}), torch::arange(V, options).repeat({n})};
+  auto view = torch::arange(V, options).repeat({n});
+  render::count_work(0, kernels::bytes_of(view));
+  return {uv.reshape({-1, 2}), view};
 }
 
 torch::Tensor PixelReadout::sample(const Taps& level_taps, const Taps& image_taps) const {
@@ -294,6 +297,7 @@ std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv,
   Taps t = kernels::level_taps(uv, view, {{{H, W}}, {0}, H, W});
   const int64_t M = t.index.size(0), T_ = t.index.size(1), views = int64_t(offset.size());
   auto inside = torch::empty({M}, t.index.options().dtype(torch::kBool));
+  render::count_work(8.0 * double(M * T_), 2 * kernels::bytes_of(t.index) + double(M));
   int64_t* ti = t.index.data_ptr<int64_t>();
   bool* in = inside.data_ptr<bool>();
   AT_DISPATCH_FLOATING_TYPES(t.weight.scalar_type(), "window_taps", [&] {

@@ -1,6 +1,7 @@
 #include "model/fdi.hpp"
 
 #include "model/kernels/view_attention.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model {
 
@@ -41,18 +42,19 @@ FDIFolded FDIImpl::fold() const {
 torch::Tensor FDIImpl::forward(const FDIFolded& f, const torch::Tensor& s, const torch::Tensor& a,
                                const Products& P) const {
   const int64_t d = key0 ? key0->weight.size(0) : 0;  // the attention's key width
-  torch::Tensor pre;
-  if (key0 && key1) {  // the view attention kernel takes fp32
-    pre = kernels::view_attention(Products::fp32(P.linear(s, f.w1, f.b1)),
-                                  Products::fp32(P.linear(a, f.w0, f.b0)), d);
+  torch::Tensor pre;                                  // relu(fc_1(o_v))
+  if (key0 && key1) {  // the kernel reads the products' type and writes it, clamped
+    pre = kernels::view_attention(P.linear(s, f.w1, f.b1), P.linear(a, f.w0, f.b0), d, true);
   } else if (key0) {  // w/o h: the appearance keys attend to each other
     const auto kv = Products::fp32(P.linear(a, f.w0, f.b0));
     const auto k = kv.narrow(2, 0, d), u = kv.narrow(2, d, kv.size(2) - d);
-    pre = torch::baddbmm(u + fc_1->bias, kernels::view_attention_weights(k, k), u);
+    pre = torch::baddbmm(u + fc_1->bias, kernels::view_attention_weights(k, k), u).relu_();
   } else {  // w/o a: fc_1(value1(s_v))
-    pre = P.linear(s, f.w1, f.b1);
+    pre = P.linear(s, f.w1, f.b1).relu_();
   }
-  return P.linear(pre.relu_(), fc_2->weight, fc_2->bias).relu_();  // e_v
+  auto e = P.linear(pre, fc_2->weight, fc_2->bias).relu_();  // e_v
+  kernels::count_elementwise(e, 1);
+  return e;
 }
 
 }  // namespace th::model

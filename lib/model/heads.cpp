@@ -1,6 +1,8 @@
 #include "model/heads.hpp"
 
 #include "model/kernels/encoding.hpp"
+#include "model/kernels/view_mean.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model {
 
@@ -33,7 +35,8 @@ HeadsFolded HeadsImpl::fold() const {
 }
 
 torch::Tensor HeadsImpl::density(const torch::Tensor& e, const Products& P) const {
-  const auto h = P.linear(Products::fp32(e).mean(1), fc_3->weight, fc_3->bias).relu_();
+  const auto h = P.linear(kernels::view_mean(e), fc_3->weight, fc_3->bias).relu_();
+  kernels::count_elementwise(h, 1);
   return P.linear_fp32(h, alpha_fc->weight, alpha_fc->bias).squeeze(1);
 }
 
@@ -45,20 +48,15 @@ torch::Tensor HeadsImpl::colour(const HeadsFolded& f, const torch::Tensor& e,
                                 const Products& P) const {
   const bool many = dir_code.dim() == 3;
   const auto codes = many ? dir_code : dir_code.unsqueeze(0);
-  const auto base = Products::fp32(P.linear(e, f.e_weight, f.e_bias));
+  const auto base = P.linear(e, f.e_weight, f.e_bias);  // the kernel reads bf16 or fp32
   std::vector<torch::Tensor> rgb;
   for (int64_t k = 0; k < codes.size(0); ++k) {
     const auto direction =
-        P.linear_fp32(codes[k], view_fc->weight.narrow(1, 256, kernels::kDirectionEncodingDim))
-            .unsqueeze(1);
-    auto c = many ? base + direction : base.add_(direction);
-    if (rgb_res_0) {
-      const int64_t half = readout.size(2) / 2;
-      c = c.add_(readout.narrow(2, 0, half)).relu_() + readout.narrow(2, half, half);
-    } else {  // w/o a: no readout of p_v
-      c = c.relu_();
-    }
-    const auto h = P.linear_fp32(c.mean(1), fc_4->weight, fc_4->bias).relu_();
+        P.linear_fp32(codes[k], view_fc->weight.narrow(1, 256, kernels::kDirectionEncodingDim));
+    // mean over v of relu(c_v) + rgb_res_1(p_v), or of relu(c_v) w/o a (no readout of p_v)
+    const auto c = kernels::colour_mean(base, direction, rgb_res_0 ? readout : torch::Tensor());
+    const auto h = P.linear_fp32(c, fc_4->weight, fc_4->bias).relu_();
+    kernels::count_elementwise(h, 1);
     rgb.push_back(P.linear_fp32(h, rgb_fc->weight, rgb_fc->bias));
   }
   return many ? torch::stack(rgb) : rgb[0];

@@ -5,6 +5,7 @@
 #include "model/fdi.hpp"
 #include "model/heads.hpp"
 #include "model/kernels/forms.hpp"
+#include "model/kernels/gather.hpp"
 #include "render/chunks.hpp"
 
 namespace th::model {
@@ -57,17 +58,20 @@ PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, c
 namespace {
 
 torch::Tensor read_windows(const WindowReadouts& px, const WindowReadout& readout,
-                           const EncoderImpl& encoder, const torch::Tensor& uv) {
+                           const EncoderImpl& encoder, const torch::Tensor& uv,
+                           const kernels::GatherEpilogue& epilogue) {
   const auto [flat, view] = PixelGeometry::point_view_rows(uv);
   const auto& g = px.enc.geometry;
   const auto [taps, inside] = px.windows.taps(flat, view, g.height, g.width);
-  auto out = kernels::weighted_gather(readout.table, taps);
+  auto out = kernels::weighted_gather(readout.table, taps, {}, epilogue);
   if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
     const auto idx = (~inside).nonzero().flatten();
     const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
     const auto p =
         encoder.sample_pixel_features(px.enc, g.stacked_level_taps(f, v), g.image_taps(f, v));
-    out.index_copy_(0, idx, torch::nn::functional::linear(p, readout.weight, readout.layer_bias));
+    auto rows = torch::nn::functional::linear(p, readout.weight, readout.layer_bias);
+    if (epilogue.relu) rows.relu_();
+    out.index_copy_(0, idx, rows.to(out.scalar_type()));
   }
   return out.view({uv.size(0), uv.size(1), -1});
 }
@@ -75,16 +79,20 @@ torch::Tensor read_windows(const WindowReadouts& px, const WindowReadout& readou
 }  // namespace
 
 torch::Tensor sample_pixels(const PixelStage& stage, const EncoderImpl& encoder,
-                            const torch::Tensor& uv, PixelLayer layer) {
+                            const torch::Tensor& uv, PixelLayer layer, bool relu,
+                            c10::optional<c10::ScalarType> dtype) {
   const bool alpha = layer == PixelLayer::appearance;
   if (const auto* px = std::get_if<PixelReadouts>(&stage)) {
     const auto [flat, view] = PixelGeometry::point_view_rows(uv);
-    return (alpha ? px->alpha : px->color)
-        .sample(px->geometry.stacked_level_taps(flat, view), px->geometry.image_taps(flat, view))
-        .view({uv.size(0), uv.size(1), -1});
+    auto out = (alpha ? px->alpha : px->color)
+                   .sample(px->geometry.stacked_level_taps(flat, view),
+                           px->geometry.image_taps(flat, view))
+                   .view({uv.size(0), uv.size(1), -1});
+    if (relu) out = out.relu();
+    return dtype ? out.to(*dtype) : out;
   }
   if (const auto* px = std::get_if<WindowReadouts>(&stage))
-    return read_windows(*px, alpha ? px->alpha : px->color, encoder, uv);
+    return read_windows(*px, alpha ? px->alpha : px->color, encoder, uv, {{}, relu, dtype});
   return {};  // NoPixels
 }
 

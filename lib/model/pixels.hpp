@@ -33,9 +33,11 @@ PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, c
                           const torch::Tensor& vertices, double cull_distance);
 
 enum class PixelLayer { appearance, colour };
-// The layer's readout at the projections uv (N, V, 2) -> (N, V, Cout); undefined w/o appearance.
+// The layer's readout at the projections uv (N, V, 2) -> (N, V, Cout), clamped at zero with
+// `relu` and written in `dtype` (fp32 when unset); undefined w/o appearance.
 torch::Tensor sample_pixels(const PixelStage& stage, const EncoderImpl& encoder,
-                            const torch::Tensor& uv, PixelLayer layer);
+                            const torch::Tensor& uv, PixelLayer layer, bool relu = false,
+                            c10::optional<c10::ScalarType> dtype = c10::nullopt);
 
 // The windows of a frame: per view, the rectangle that the points within `distance` of a vertex
 // project into.

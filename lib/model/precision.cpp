@@ -10,6 +10,7 @@
 #include "core/runtime.hpp"
 #include "core/torch_compat.hpp"
 #include "model/kernels/onednn_linear.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model {
 
@@ -34,7 +35,23 @@ torch::Tensor Products::linear(const torch::Tensor& x, const torch::Tensor& w,
                                const torch::Tensor& b) const {
   if (bf16()) {
     const auto t = torch::kBFloat16;
-    return F::linear(x.to(t), w.to(t), b.defined() ? b.to(t) : b);
+    const auto xb = x.to(t), wb = w.to(t);
+    if (x.scalar_type() != t) kernels::count_conversion(x, xb);
+    kernels::count_conversion(w, wb);
+    const int64_t in = xb.size(-1), rows = in > 0 ? xb.numel() / in : 0;
+    torch::Tensor y, bias = b;
+    if (onednn && kernels::onednn_bf16() && rows >= kOneDnnMinRows && xb.device().is_cpu()) {
+      // oneDNN's primitive: fp32 accumulation, the bias added in fp32, y rounded once
+      auto sizes = xb.sizes().vec();
+      sizes.back() = w.size(0);
+      y = kernels::onednn_linear(xb.reshape({rows, in}), wb, b).view(sizes);
+    } else {
+      bias = b.defined() ? b.to(t) : b;
+      kernels::count_conversion(b, bias);
+      y = F::linear(xb, wb, bias);
+    }
+    kernels::count_product(xb, wb, bias, y);
+    return y;
   }
   return linear_fp32(x, w, b);
 }
@@ -43,16 +60,24 @@ torch::Tensor Products::linear_fp32(const torch::Tensor& x, const torch::Tensor&
                                     const torch::Tensor& b) const {
   const auto xf = fp32(x);
   const int64_t in = xf.size(-1), rows = in > 0 ? xf.numel() / in : 0;
-  if (!onednn || rows < kOneDnnMinRows || xf.scalar_type() != torch::kFloat)
-    return F::linear(xf, w, b);
-  auto sizes = xf.sizes().vec();
-  sizes.back() = w.size(0);
-  return kernels::onednn_linear(xf.reshape({rows, in}), w, b).view(sizes);
+  torch::Tensor y;
+  if (!onednn || rows < kOneDnnMinRows || xf.scalar_type() != torch::kFloat) {
+    y = F::linear(xf, w, b);
+  } else {
+    auto sizes = xf.sizes().vec();
+    sizes.back() = w.size(0);
+    y = kernels::onednn_linear(xf.reshape({rows, in}), w, b).view(sizes);
+  }
+  kernels::count_product(xf, w, b, y);
+  return y;
 }
 
 torch::Tensor Products::fp32(const torch::Tensor& x) {
   const auto t = x.scalar_type();
-  return t == torch::kBFloat16 || t == torch::kHalf ? x.to(torch::kFloat) : x;
+  if (t != torch::kBFloat16 && t != torch::kHalf) return x;
+  auto y = x.to(torch::kFloat);
+  kernels::count_conversion(x, y);
+  return y;
 }
 
 std::string Products::describe() const {

@@ -6,17 +6,19 @@
 //
 // What runs in which type:
 // - per-point products (FDI's key/value projections and fc_2, the density head's fc_3, the
-//   colour head's feature product): fp32 through oneDNN or BLAS (below); bf16 operands with
-//   fp32 accumulation (oneDNN) under bf16.
+//   colour head's feature product): fp32 through oneDNN or BLAS (below); under bf16, bf16
+//   operands, fp32 accumulation and bias, bf16 output (oneDNN's primitive where this build calls
+//   it directly, LibTorch's bf16 linear otherwise).
+// - the activations that only those products read (Products::between): bf16 under bf16, written
+//   so by the kernels that make them (DPaRF's and the appearance readout's gathers, the view
+//   attention) after computing them in fp32, and read as bf16 by the kernels after them (the view
+//   attention, the heads' view means).
 // - per-frame modules (ResNet encoder, TransHE: convolutions, linear layers, attention
 //   products): fp32; autocast to bf16 under bf16, outputs cast back to fp32.
-// - everything else (positional encodings, DPaRF's distances, nearest fields and weights,
-//   gathers of tables, the view attention's softmax, the last layers of both heads,
-//   compositing, losses, metrics, optimiser state and master weights, checkpoints): fp32.
+// - everything else (positional encodings, DPaRF's distances, nearest fields and weights, the
+//   gathers' sums, the view attention's softmax, the heads' means and last layers, compositing,
+//   losses, metrics, optimiser state and master weights, checkpoints): fp32.
 //
-// A bf16 product's output stays bf16 only where another product or a ReLU follows; the
-// project's own kernels (the view attention, weighted gathers) take fp32, so their inputs are
-// converted at the boundary (measured: conversion costs less than bf16 loads in those kernels).
 // Weights stay fp32 parameters and are cast per use, so gradients reach fp32 master weights.
 //
 // fp32 products: oneDNN (a reorder in, the product, a reorder out) runs faster than OpenBLAS
@@ -42,6 +44,11 @@ struct Products {
   bool onednn = false;  // fp32 products through oneDNN (CPU only)
 
   bool bf16() const { return precision == Precision::bf16; }
+  // The type of activations that only products read: bf16 under bf16 for fp32 ones (the
+  // kernels that make them write bf16 rows), `type` itself otherwise.
+  c10::ScalarType between(c10::ScalarType type) const {
+    return bf16() && type == c10::ScalarType::Float ? c10::ScalarType::BFloat16 : type;
+  }
   // y = x w^T + b: x (..., in) fp32 or bf16, w (out, in) and b (out) fp32 (b may be undefined)
   // -> (..., out) in the compute type (bf16 under bf16). Differentiable in x, w and b. A float64
   // model (gradient checks) computes in float64 under fp32 and never through oneDNN.

@@ -96,14 +96,15 @@ TransHumanImpl::Trunk TransHumanImpl::trunk(const FrameCache& frame, const torch
     ScopedTimer timer(profile_, "dparf");
     s = human->forward(frame.human, torch::mm(pts - geo.Th, geo.Rh), products_);
   }
-  // 3.4 a_v = relu(alpha_res_0(p_v)) at the points' projections uv into the reference views.
+  // 3.4 a_v = relu(alpha_res_0(p_v)) at the points' projections uv into the reference views, in
+  // the type FDI's products read.
   const auto uv = geometry::project_views(pts, geo.K, geo.R, geo.T).permute({1, 0, 2}).contiguous();
   torch::Tensor a;
   {
     ScopedTimer timer(profile_, "sampling");
-    a = sample_pixels(frame.pixels, *encoder, uv, PixelLayer::appearance);
+    a = sample_pixels(frame.pixels, *encoder, uv, PixelLayer::appearance, true,
+                      products_.between(uv.scalar_type()));
   }
-  if (a.defined()) a.relu_();
   // 3.4 FDI: e_v from the views' attention of s_v over a_v.
   ScopedTimer timer(profile_, "fdi");
   return {fdi->forward(frame.network.fdi, s, a, products_), uv};

@@ -66,6 +66,11 @@ Composite composite(const torch::Tensor& raw, const torch::Tensor& z,
   return c;
 }
 
+Profile*& detail::thread_profile() {
+  thread_local Profile* profile = nullptr;
+  return profile;
+}
+
 VolumeRenderer::VolumeRenderer(const RenderConfig& config, Profile* profile)
     : config_(config), profile_(profile) {}
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/config.hpp"
@@ -26,18 +27,45 @@ struct Rays {
   Rays index(const torch::Tensor& rows) const;
 };
 
-// Wall time per named stage, accumulated (benchmarks; null pointer = off). Nested timers count
-// exclusively: a stage's time excludes the stages timed inside it.
+// The work of a stage as its operations count it (count_work): floating-point operations of the
+// form that runs (a product of (M, K) by (K, N): 2 M K N; a transcendental function: one) and
+// compulsory memory traffic (each operand read once, each result written once, a gathered table
+// at most once).
+struct Work {
+  double flops = 0, bytes = 0;
+};
+
+// Wall time and work per named stage, accumulated (benchmarks; null pointer = off). Nested timers
+// count exclusively: a stage's time excludes the stages timed inside it; work goes to the
+// innermost open stage, "other" when none is open.
 struct Profile {
   std::map<std::string, double> seconds;
-  std::vector<double> open;  // time of finished children, per open timer
+  std::map<std::string, Work> work;
+  std::vector<double> open;         // time of finished children, per open timer
+  std::vector<const char*> stages;  // the open timers' stages, innermost last
 };
+
+namespace detail {
+Profile*& thread_profile();  // the profile of the innermost timer open on this thread
+}
+
+// Adds work to the innermost stage open on this thread (nothing while no profile is on).
+inline void count_work(double flops, double bytes) {
+  Profile* p = detail::thread_profile();
+  if (!p) return;
+  auto& w = p->work[p->stages.empty() ? "other" : p->stages.back()];
+  w.flops += flops;
+  w.bytes += bytes;
+}
 
 class ScopedTimer {
  public:
   ScopedTimer(Profile* profile, const char* stage)
       : profile_(profile), stage_(stage), start_(std::chrono::steady_clock::now()) {
-    if (profile_) profile_->open.push_back(0.0);
+    if (!profile_) return;
+    profile_->open.push_back(0.0);
+    profile_->stages.push_back(stage);
+    previous_ = std::exchange(detail::thread_profile(), profile_);
   }
   ~ScopedTimer() {
     if (!profile_) return;
@@ -45,6 +73,8 @@ class ScopedTimer {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
     const double children = profile_->open.back();
     profile_->open.pop_back();
+    profile_->stages.pop_back();
+    detail::thread_profile() = previous_;
     profile_->seconds[stage_] += elapsed - children;
     if (!profile_->open.empty()) profile_->open.back() += elapsed;
   }
@@ -53,6 +83,7 @@ class ScopedTimer {
 
  private:
   Profile* profile_;
+  Profile* previous_ = nullptr;
   const char* stage_;
   std::chrono::steady_clock::time_point start_;
 };

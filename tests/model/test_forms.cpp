@@ -7,6 +7,7 @@
 
 #include "model/frame_fixture.hpp"
 #include "model/kernels/forms.hpp"
+#include "model/precision.hpp"
 #include "model/transhuman.hpp"
 #include "render/volume.hpp"
 
@@ -67,11 +68,58 @@ TEST_CASE("profiling: each stage's time, the method's results unchanged", "[mode
     CHECK(profile.seconds[stage] >= 0);
   }
   CHECK(profile.open.empty());  // every timer closed
+  CHECK(profile.stages.empty());
+  // Each per-point stage counts the work of its operations.
+  for (const char* stage : {"dparf", "sampling", "fdi", "heads"}) {
+    INFO(stage);
+    CHECK(profile.work[stage].flops > 0);
+    CHECK(profile.work[stage].bytes > 0);
+  }
 
   // Without a profile, nothing more is recorded.
   const auto before = profile.seconds;
   model->forward(cache, pts, dirs);
   CHECK(profile.seconds == before);
+}
+
+TEST_CASE("work is counted in the innermost stage open on the thread, products at their shapes",
+          "[model][forms]") {
+  torch::NoGradGuard no_grad;
+  const auto x = torch::randn({300, 64}), w = torch::randn({96, 64}), b = torch::randn({96});
+  render::Profile profile;
+  for (const bool onednn : {false, true}) {
+    Products p;
+    p.onednn = onednn;
+    {
+      render::ScopedTimer outer(&profile, "outer");
+      render::ScopedTimer inner(&profile, "inner");
+      p.linear(x, w, b);
+    }
+    {
+      render::ScopedTimer outer(&profile, "outer");
+      p.linear(x, w, b);
+    }
+  }
+  const double flops = 2.0 * 300 * 64 * 96 + 300 * 96;
+  const double bytes = 4.0 * (300 * 64 + 96 * 64 + 96 + 300 * 96);
+  CHECK(profile.work["inner"].flops == 2 * flops);
+  CHECK(profile.work["inner"].bytes == 2 * bytes);
+  CHECK(profile.work["outer"].flops == 2 * flops);
+  // bf16: the conversions of x and w count their traffic, the product its bf16 operands.
+  Products bf;  // LibTorch's bf16 product: the bias converted too
+  bf.precision = Precision::bf16;
+  render::Profile p16;
+  {
+    render::ScopedTimer t(&p16, "bf16");
+    bf.linear(x, w, b);
+  }
+  CHECK(p16.work["bf16"].flops == flops);
+  CHECK(p16.work["bf16"].bytes ==
+        6.0 * (300 * 64 + 96 * 64 + 96) + 2.0 * (300 * 64 + 96 * 64 + 96 + 300 * 96));
+  // No timer open on the thread: nothing is counted anywhere.
+  Products{}.linear(x, w, b);
+  CHECK(profile.work.size() == 2);
+  CHECK(p16.work.size() == 1);
 }
 
 TEST_CASE("LibTorch forms: the CPU kernels step aside while the guard lives", "[model][forms]") {

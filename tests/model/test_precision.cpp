@@ -3,6 +3,7 @@
 #include <torch/torch.h>
 
 #include <catch2/catch.hpp>
+#include <cmath>
 #include <fstream>
 #include <set>
 #include <sstream>
@@ -176,6 +177,16 @@ TEST_CASE("the direct oneDNN product equals LibTorch's mkldnn_linear to the bit"
       const auto xt = torch::randn({in, rows}).t();  // strided rows
       CHECK(torch::equal(th::model::kernels::onednn_linear(xt, w, b),
                          at::mkldnn_linear(xt.contiguous().to_mkldnn(), w, ob).to_dense()));
+      // bf16 operands: the exact product of the bf16 values plus the fp32 bias, rounded once
+      // (within one bf16 rounding: the sums run in fp32).
+      if (!th::model::kernels::onednn_bf16()) continue;
+      const auto xb = x.to(torch::kBFloat16), wb = w.to(torch::kBFloat16);
+      const auto yb = th::model::kernels::onednn_linear(xb, wb, b);
+      CHECK(yb.scalar_type() == torch::kBFloat16);
+      auto exact = torch::mm(xb.to(torch::kDouble), wb.to(torch::kDouble).t());
+      if (bias) exact += b.to(torch::kDouble);
+      const auto err = (yb.to(torch::kDouble) - exact).abs();
+      CHECK((err <= exact.abs() * std::pow(2.0, -8) + 1e-4).all().item<bool>());
     }
   }
 }

@@ -11,6 +11,7 @@
 #include "model/kernels/forms.hpp"
 #include "model/kernels/nearest_fields.hpp"
 #include "model/kernels/view_attention.hpp"
+#include "model/kernels/view_mean.hpp"
 #include "model/pixels.hpp"
 #include "model/transhuman.hpp"
 
@@ -87,6 +88,48 @@ TEST_CASE("weighted gather backward equals index_select autograd", "[model][samp
   CHECK(max_abs(g1, g2) < 1e-12);
 }
 
+TEST_CASE("the gather's epilogue equals its operations done after the gather",
+          "[model][sampling]") {
+  torch::manual_seed(3);
+  const int64_t M = 40, G = 8;
+  const auto table = torch::randn({60, 3 * G}, torch::kDouble).requires_grad_(true);
+  const auto addend = torch::randn({M, G}, torch::kDouble).requires_grad_(true);
+  const Taps taps{torch::randint(0, 60, {M, 4}), torch::rand({M, 4}, torch::kDouble)};
+  const auto g = torch::randn({M, 3 * G}, torch::kDouble);
+  // The CPU kernel against the LibTorch form: addend on each group of G channels, then the clamp.
+  const auto fused = kernels::weighted_gather(table, taps, {}, {addend, true, c10::nullopt});
+  torch::Tensor ref;
+  {
+    kernels::LibTorchForms forms;
+    ref = kernels::weighted_gather(table, taps, {}, {addend, true, c10::nullopt});
+  }
+  const auto plain =
+      (kernels::weighted_gather(table, taps).view({M, 3, G}) + addend.unsqueeze(1)).relu();
+  CHECK(max_abs(fused, plain.view({M, -1})) < 1e-12);
+  CHECK(max_abs(fused, ref) < 1e-12);
+  CHECK((fused == 0).any().item<bool>());  // the clamp acts
+  const auto ga = torch::autograd::grad({fused}, {table, addend}, {g});
+  const auto gb = torch::autograd::grad({ref}, {table, addend}, {g});
+  CHECK(max_abs(ga[0], gb[0]) < 1e-12);
+  CHECK(max_abs(ga[1], gb[1]) < 1e-12);
+  // bf16 rows: the fp32 rows rounded once, to the bit; gradients in fp32.
+  const auto t32 = table.detach().to(torch::kFloat).requires_grad_(true);
+  const auto a32 = addend.detach().to(torch::kFloat);
+  const auto rows32 = kernels::weighted_gather(t32, taps, {}, {a32, true, c10::nullopt});
+  const auto rows16 = kernels::weighted_gather(t32, taps, {}, {a32, true, torch::kBFloat16});
+  CHECK(rows16.scalar_type() == torch::kBFloat16);
+  CHECK(torch::equal(rows16, rows32.to(torch::kBFloat16)));
+  const auto g16 = torch::autograd::grad({rows16}, {t32}, {g.to(torch::kBFloat16)})[0];
+  const auto g32 =
+      torch::autograd::grad({rows32}, {t32}, {g.to(torch::kBFloat16).to(torch::kFloat)})[0];
+  CHECK(g16.scalar_type() == torch::kFloat);
+  CHECK(max_abs(g16, g32) < 1e-6);
+  // A float64 table writes no bf16 rows.
+  CHECK_THROWS_WITH(
+      kernels::weighted_gather(table.detach(), taps, {}, {{}, false, torch::kBFloat16}),
+      Catch::Contains("bf16 from a float table"));
+}
+
 TEST_CASE("pixel readouts equal the linear layer on the materialised pixel feature",
           "[model][sampling]") {
   torch::manual_seed(3);
@@ -142,6 +185,91 @@ TEST_CASE("the fused view-attention kernel equals bmm/softmax, values and gradie
   const auto gb = torch::autograd::grad({b}, {q, kv}, {g});
   CHECK(max_abs(ga[0], gb[0]) < 1e-12);
   CHECK(max_abs(ga[1], gb[1]) < 1e-12);
+}
+
+TEST_CASE("the view attention's clamp and bf16 operands: values and gradients",
+          "[model][shortcuts]") {
+  torch::manual_seed(8);
+  const int64_t n = 40, V = 3;
+  auto q = torch::randn({n, V, 384}, torch::kDouble).requires_grad_(true);
+  auto kv = torch::randn({n, V, 384}, torch::kDouble).requires_grad_(true);
+  const auto g = torch::randn({n, V, 256}, torch::kDouble);
+  const auto a = kernels::view_attention(q, kv, 128, true);
+  torch::Tensor b;
+  {
+    kernels::LibTorchForms forms;
+    b = kernels::view_attention(q, kv, 128, true);
+  }
+  CHECK(max_abs(a, kernels::view_attention(q, kv, 128).relu()) < 1e-12);
+  CHECK(max_abs(a, b) < 1e-12);
+  CHECK((a == 0).any().item<bool>());
+  const auto ga = torch::autograd::grad({a}, {q, kv}, {g});
+  const auto gb = torch::autograd::grad({b}, {q, kv}, {g});
+  CHECK(max_abs(ga[0], gb[0]) < 1e-12);
+  CHECK(max_abs(ga[1], gb[1]) < 1e-12);
+  // bf16 operands: the fp32 kernel on the same values, rounded once to bf16.
+  const auto q16 = q.detach().to(torch::kBFloat16), kv16 = kv.detach().to(torch::kBFloat16);
+  const auto out16 = kernels::view_attention(q16, kv16, 128, true);
+  CHECK(out16.scalar_type() == torch::kBFloat16);
+  const auto out32 =
+      kernels::view_attention(q16.to(torch::kFloat), kv16.to(torch::kFloat), 128, true);
+  CHECK(torch::equal(out16, out32.to(torch::kBFloat16)));
+  // Its gradients: the fp32 kernel's, in bf16.
+  const auto qb = q16.clone().requires_grad_(true), kb = kv16.clone().requires_grad_(true);
+  const auto q32 = q16.to(torch::kFloat).requires_grad_(true),
+             k32 = kv16.to(torch::kFloat).requires_grad_(true);
+  const auto gh = g.to(torch::kBFloat16);
+  const auto g16 =
+      torch::autograd::grad({kernels::view_attention(qb, kb, 128, true)}, {qb, kb}, {gh});
+  const auto g32 = torch::autograd::grad({kernels::view_attention(q32, k32, 128, true)}, {q32, k32},
+                                         {gh.to(torch::kFloat)});
+  CHECK(g16[0].scalar_type() == torch::kBFloat16);
+  CHECK(torch::equal(g16[0], g32[0].to(torch::kBFloat16)));
+  CHECK(torch::equal(g16[1], g32[1].to(torch::kBFloat16)));
+}
+
+TEST_CASE("the heads' view means equal LibTorch's mean, fp32 to the bit, with gradients",
+          "[model][shortcuts]") {
+  torch::manual_seed(9);
+  const int64_t n = 30, V = 3, C = 16;
+  const auto x = torch::randn({n, V, C}, torch::kDouble).requires_grad_(true);
+  const auto d = torch::randn({n, C}, torch::kDouble).requires_grad_(true);
+  const auto r = torch::randn({n, V, 2 * C}, torch::kDouble).requires_grad_(true);
+  const auto g = torch::randn({n, C}, torch::kDouble);
+  // The colour head's terms as the definition writes them.
+  auto direct = [&](const torch::Tensor& xs, const torch::Tensor& ds, const torch::Tensor& rs) {
+    auto c = xs + ds.unsqueeze(1);
+    c = rs.defined() ? (c + rs.narrow(2, 0, C)).relu() + rs.narrow(2, C, C) : c.relu();
+    return c.mean(1);
+  };
+  for (const bool readout : {true, false}) {
+    INFO("readout " << readout);
+    const auto rr = readout ? r : torch::Tensor();
+    const auto a = kernels::colour_mean(x, d, rr);
+    const auto b = direct(x, d, rr);
+    CHECK(max_abs(a, b) < 1e-12);
+    std::vector<torch::Tensor> inputs{x, d};
+    if (readout) inputs.push_back(r);
+    const auto ga = torch::autograd::grad({a}, inputs, {g});
+    const auto gb = torch::autograd::grad({b}, inputs, {g});
+    for (size_t i = 0; i < inputs.size(); ++i) CHECK(max_abs(ga[i], gb[i]) < 1e-12);
+    // fp32: the same bits as LibTorch's operations in this order.
+    const auto x32 = x.detach().to(torch::kFloat), d32 = d.detach().to(torch::kFloat);
+    const auto r32 = readout ? r.detach().to(torch::kFloat) : torch::Tensor();
+    CHECK(torch::equal(kernels::colour_mean(x32, d32, r32), direct(x32, d32, r32)));
+    // bf16 terms are read as their fp32 values.
+    const auto x16 = x32.to(torch::kBFloat16);
+    CHECK(
+        torch::equal(kernels::colour_mean(x16, d32, r32), direct(x16.to(torch::kFloat), d32, r32)));
+  }
+  const auto m = kernels::view_mean(x);
+  CHECK(max_abs(m, x.mean(1)) < 1e-12);
+  CHECK(max_abs(torch::autograd::grad({m}, {x}, {g})[0],
+                torch::autograd::grad({x.mean(1)}, {x}, {g})[0]) < 1e-12);
+  const auto x32 = x.detach().to(torch::kFloat);
+  CHECK(torch::equal(kernels::view_mean(x32), x32.mean(1)));
+  CHECK(torch::equal(kernels::view_mean(x32.to(torch::kBFloat16)),
+                     x32.to(torch::kBFloat16).to(torch::kFloat).mean(1)));
 }
 
 TEST_CASE("the one-pass DPaRF query equals its LibTorch form", "[model][shortcuts]") {

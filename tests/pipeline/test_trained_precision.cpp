@@ -104,7 +104,7 @@ TEST_CASE("on a trained network, bf16 products render every ray within 2e-3 of f
   for (int samples : {64, 16}) {
     CAPTURE(samples);
     const auto d = render_difference(f, fp32, bf16, 4, samples);
-    CHECK(d.rgb_max <= 2e-3);  // measured: 1.8e-4 (rgb), 4.3e-4 (acc); means 2.2e-5, 4e-5
+    CHECK(d.rgb_max <= 2e-3);  // measured: 2.5e-4 (rgb), 5.0e-4 (acc); means 2.9e-5, 4.7e-5
     CHECK(d.acc_max <= 2e-3);
     CHECK(d.rgb_mean <= 2e-4);
     CHECK(d.acc_mean <= 2e-4);

@@ -5,8 +5,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
+#include "model/kernels/bf16.hpp"
 #include "model/kernels/forms.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model::kernels {
 namespace {
@@ -55,6 +58,28 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void scatter_row_f(
     float* grad_table, const float* grad_out, RowTaps<float> r, int64_t c0, int64_t c1) {
   scatter_row<float>(grad_table, grad_out, r, c0, c1);
 }
+// The epilogue of a row in place: the addend on each group of G channels, then the clamp.
+template <class T>
+inline __attribute__((always_inline)) void finish_row(T* __restrict row, const T* __restrict add,
+                                                      int64_t C, int64_t G, bool relu) {
+  if (add)
+    for (int64_t g = 0; g < C; g += G)
+      for (int64_t c = 0; c < G; ++c) row[g + c] += add[c];
+  if (relu)
+    for (int64_t c = 0; c < C; ++c) row[c] = row[c] < T(0) ? T(0) : row[c];  // NaN stays NaN
+}
+__attribute__((target_clones("avx512f", "avx2", "default"))) void finish_row_f(float* row,
+                                                                               const float* add,
+                                                                               int64_t C, int64_t G,
+                                                                               bool relu) {
+  finish_row<float>(row, add, C, G, relu);
+}
+void finish_row_any(float* row, const float* add, int64_t C, int64_t G, bool relu) {
+  finish_row_f(row, add, C, G, relu);
+}
+void finish_row_any(double* row, const double* add, int64_t C, int64_t G, bool relu) {
+  finish_row<double>(row, add, C, G, relu);
+}
 void gather_row_any(float* out, const float* table, RowTaps<float> r) {
   gather_row_f(out, table, r);
 }
@@ -68,18 +93,34 @@ void scatter_row_any(double* gt, const double* g, RowTaps<double> r, int64_t c0,
   scatter_row<double>(gt, g, r, c0, c1);
 }
 
+// bf16 rows come from float tables only (weighted_gather checks).
+void store_bf16(c10::BFloat16* out, const float* row, int64_t n) { to_bf16(out, row, n); }
+void store_bf16(c10::BFloat16*, const double*, int64_t) {}
+
+// The forward pass: rows summed in the table's type, finished in cache, written in `dtype` (the
+// table's, or bf16 from a float table).
 torch::Tensor gather_forward_cpu(const torch::Tensor& table, const torch::Tensor& index,
-                                 const torch::Tensor& weight) {
+                                 const torch::Tensor& weight, const torch::Tensor& addend,
+                                 bool relu, c10::ScalarType dtype) {
   const int64_t M = index.size(0), T_ = index.size(1), C = table.size(1);
-  auto out = torch::empty({M, C}, table.options());
+  auto out = torch::empty({M, C}, table.options().dtype(dtype));
+  const bool to_bf16_rows = dtype != table.scalar_type();
   AT_DISPATCH_FLOATING_TYPES(table.scalar_type(), "weighted_gather", [&] {
     const scalar_t* tab = table.data_ptr<scalar_t>();
     const int64_t* idx = index.data_ptr<int64_t>();
     const scalar_t* w = weight.data_ptr<scalar_t>();
-    scalar_t* o = out.data_ptr<scalar_t>();
+    const scalar_t* add = addend.defined() ? addend.data_ptr<scalar_t>() : nullptr;
+    const int64_t G = addend.defined() ? addend.size(1) : C;
+    scalar_t* o = to_bf16_rows ? nullptr : out.data_ptr<scalar_t>();
+    c10::BFloat16* ob = to_bf16_rows ? out.data_ptr<c10::BFloat16>() : nullptr;
     at::parallel_for(0, M, 64, [&](int64_t begin, int64_t end) {
-      for (int64_t m = begin; m < end; ++m)
-        gather_row_any(o + m * C, tab, RowTaps<scalar_t>{idx + m * T_, w + m * T_, T_, C});
+      std::vector<scalar_t> scratch(to_bf16_rows ? C : 0);
+      for (int64_t m = begin; m < end; ++m) {
+        scalar_t* row = to_bf16_rows ? scratch.data() : o + m * C;
+        gather_row_any(row, tab, RowTaps<scalar_t>{idx + m * T_, w + m * T_, T_, C});
+        if (add || relu) finish_row_any(row, add ? add + m * G : nullptr, C, G, relu);
+        if (to_bf16_rows) store_bf16(ob + m * C, row, C);
+      }
     });
   });
   return out;
@@ -112,27 +153,40 @@ void gather_backward_cpu(const torch::Tensor& grad_out, const torch::Tensor& ind
 }
 
 struct WeightedGather : torch::autograd::Function<WeightedGather> {
+  // addend: empty (numel 0) when there is none; dtype: the output's.
   static torch::Tensor forward(torch::autograd::AutogradContext* ctx, const torch::Tensor& table,
                                const torch::Tensor& index, const torch::Tensor& weight,
-                               const c10::optional<torch::Tensor>& sink) {
-    ctx->save_for_backward({index, weight});
+                               const torch::Tensor& addend,
+                               const c10::optional<torch::Tensor>& sink, bool relu, int64_t dtype) {
+    const bool add = addend.numel() > 0;
+    auto out = gather_forward_cpu(table, index, weight, add ? addend : torch::Tensor(), relu,
+                                  static_cast<c10::ScalarType>(dtype));
+    ctx->save_for_backward({index, weight, relu ? out : torch::Tensor()});
     ctx->saved_data["rows"] = table.size(0);
+    ctx->saved_data["type"] = static_cast<int64_t>(table.scalar_type());
+    ctx->saved_data["groups"] = add ? addend.size(1) : int64_t(0);
     // Not a saved variable: other chunks update the sink in place between forward and backward.
     if (sink.has_value()) ctx->saved_data["sink"] = *sink;
-    return gather_forward_cpu(table, index, weight);
+    return out;
   }
   static torch::autograd::variable_list backward(torch::autograd::AutogradContext* ctx,
                                                  torch::autograd::variable_list grad) {
     const auto saved = ctx->get_saved_variables();
-    const auto g = grad[0].contiguous();
+    auto g = grad[0].to(static_cast<c10::ScalarType>(ctx->saved_data["type"].toInt()));
+    if (saved[2].defined()) g = g * (saved[2] > 0);  // through the clamp
+    g = g.contiguous();
+    const int64_t G = ctx->saved_data["groups"].toInt();
+    torch::Tensor grad_table, grad_addend;
+    if (G > 0) grad_addend = g.view({g.size(0), -1, G}).sum(1);
     if (ctx->saved_data.count("sink")) {
       auto sink = ctx->saved_data["sink"].toTensor();
       gather_backward_cpu(g, saved[0], saved[1], sink);
-      return {torch::Tensor(), torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    } else {
+      grad_table = torch::zeros({ctx->saved_data["rows"].toInt(), g.size(1)}, g.options());
+      gather_backward_cpu(g, saved[0], saved[1], grad_table);
     }
-    auto grad_table = torch::zeros({ctx->saved_data["rows"].toInt(), g.size(1)}, g.options());
-    gather_backward_cpu(g, saved[0], saved[1], grad_table);
-    return {grad_table, torch::Tensor(), torch::Tensor(), torch::Tensor()};
+    return {grad_table,      torch::Tensor(), torch::Tensor(), grad_addend,
+            torch::Tensor(), torch::Tensor(), torch::Tensor()};
   }
 };
 
@@ -179,6 +233,9 @@ Taps level_taps_cpu(const torch::Tensor& uv, const torch::Tensor& view, const Ta
   const auto uvc = uv.contiguous();
   const auto vc = view.to(torch::kLong).contiguous();
   Taps taps{torch::empty({M, T_}, vc.options()), torch::empty({M, T_}, uv.options())};
+  // per map and axis about 12 operations; a product per tap
+  render::count_work(double(M) * (24 * double(layout.sizes.size()) + double(T_)),
+                     bytes_of(uvc) + bytes_of(vc) + bytes_of(taps.index) + bytes_of(taps.weight));
   AT_DISPATCH_FLOATING_TYPES(uv.scalar_type(), "level_taps", [&] {
     const scalar_t* p = uvc.data_ptr<scalar_t>();
     const int64_t* v = vc.data_ptr<int64_t>();
@@ -278,23 +335,50 @@ Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, const TapLay
 }
 
 torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
-                              const torch::Tensor& grad_sink) {
+                              const torch::Tensor& grad_sink, const GatherEpilogue& epilogue) {
   TORCH_CHECK(table.dim() == 2, "table must be (R, C), got ", table.sizes());
   TORCH_CHECK(taps.index.sizes() == taps.weight.sizes(), "taps index ", taps.index.sizes(),
               " and weight ", taps.weight.sizes(), " differ");
+  const auto& addend = epilogue.addend;
+  if (addend.defined())
+    TORCH_CHECK(addend.dim() == 2 && addend.size(0) == taps.index.size(0) && addend.size(1) > 0 &&
+                    table.size(1) % addend.size(1) == 0,
+                "gather addend must be (", taps.index.size(0), ", G) with G dividing ",
+                table.size(1), ", got ", addend.sizes());
+  const auto dtype = epilogue.dtype.value_or(table.scalar_type());
+  TORCH_CHECK(dtype == table.scalar_type() ||
+                  (dtype == torch::kBFloat16 && table.scalar_type() == torch::kFloat),
+              "weighted_gather writes the table's type, or bf16 from a float table; asked for ",
+              dtype, " from ", table.scalar_type());
   const auto weight = taps.weight.to(table.scalar_type()).contiguous();
   if (!cpu_kernels(table.device())) {
-    // gather, weight, sum (autograd through index_select)
+    // gather, weight, sum (autograd through index_select), then the epilogue
     const auto M = taps.index.size(0), T_ = taps.index.size(1);
-    return (table.index_select(0, taps.index.flatten()).view({M, T_, -1}) * weight.unsqueeze(-1))
-        .sum(1);
+    auto out =
+        (table.index_select(0, taps.index.flatten()).view({M, T_, -1}) * weight.unsqueeze(-1))
+            .sum(1);
+    if (addend.defined())
+      out = (out.view({M, -1, addend.size(1)}) + addend.to(out.dtype()).unsqueeze(1)).view({M, -1});
+    if (epilogue.relu) out = out.relu();
+    return out.to(dtype);
   }
   if (grad_sink.defined())
     TORCH_CHECK(grad_sink.sizes() == table.sizes() && grad_sink.is_contiguous(),
                 "gradient sink must be a contiguous tensor shaped like the table ", table.sizes());
+  {  // the taps, the rows they touch (at most the table), the addend, the output
+    const double M = double(taps.index.size(0)), T_ = double(taps.index.size(1)),
+                 C = double(table.size(1)), e = double(table.element_size());
+    const double rows = std::min(M * T_, double(table.size(0)));
+    render::count_work(M * C * (2 * T_ + (addend.defined() ? 1 : 0) + (epilogue.relu ? 1 : 0)),
+                       bytes_of(taps.index) + bytes_of(weight) + rows * C * e + bytes_of(addend) +
+                           M * C * double(c10::elementSize(dtype)));
+  }
   return WeightedGather::apply(
       table.contiguous(), taps.index.contiguous(), weight,
-      grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt);
+      addend.defined() ? addend.to(table.scalar_type()).contiguous()
+                       : torch::empty({0}, table.options()),
+      grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt, epilogue.relu,
+      static_cast<int64_t>(dtype));
 }
 
 }  // namespace th::model::kernels

@@ -34,13 +34,25 @@ struct TapLayout {
 // view: (M) int64 view of each point.
 Taps level_taps(const torch::Tensor& uv, const torch::Tensor& view, const TapLayout& layout);
 
-// out (M, C) = sum_t weight[:, t] * table[index[:, t]] with table (R, C). Differentiable w.r.t.
-// `table` only (the sampling positions carry no gradient in this model). With a `grad_sink` (a
-// contiguous (R, C) buffer, CPU), the backward pass adds the table's gradient into the sink in
-// place and gives autograd no gradient for the table: chunked evaluation then accumulates the
-// touched rows only instead of materialising a full-size gradient per chunk.
+// What a gather does to each row before it writes it, in this order: adds `addend` (M, G) to
+// each of the row's C / G groups of G channels, clamps at zero (`relu`), and writes the row in
+// `dtype` (bf16: rounded once; the sums run in the table's type). The CPU kernel does it in the
+// same pass, while the row is in cache; the LibTorch form in separate operations.
+struct GatherEpilogue {
+  torch::Tensor addend;
+  bool relu = false;
+  c10::optional<c10::ScalarType> dtype;
+};
+
+// out (M, C) = epilogue(sum_t weight[:, t] * table[index[:, t]]) with table (R, C).
+// Differentiable w.r.t. `table` and the addend (the sampling positions carry no gradient in this
+// model). With a `grad_sink` (a contiguous (R, C) buffer, CPU), the backward pass adds the
+// table's gradient into the sink in place and gives autograd no gradient for the table: chunked
+// evaluation then accumulates the touched rows only instead of materialising a full-size
+// gradient per chunk.
 torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
-                              const torch::Tensor& grad_sink = {});
+                              const torch::Tensor& grad_sink = {},
+                              const GatherEpilogue& epilogue = {});
 
 }  // namespace kernels
 }  // namespace th::model

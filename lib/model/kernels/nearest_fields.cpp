@@ -9,6 +9,7 @@
 
 #include "model/kernels/encoding.hpp"
 #include "model/kernels/forms.hpp"
+#include "model/kernels/work.hpp"
 
 namespace th::model::kernels {
 namespace {
@@ -170,6 +171,14 @@ NearestFields nearest_fields(const torch::Tensor& xs, const torch::Tensor& origi
     q.local = torch::empty({n, nk, 3}, x.options());
     q.args = torch::empty({n, nk, nf2, 3}, x.options());
   }
+  {  // per point: 8 operations and a comparison per token; per field its distance, weight,
+     // local frame (15) and arguments (one fma each)
+    const double local = options.local ? 15 + 2.0 * double(nf2) * 3 : 0;
+    render::count_work(double(n) * (9 * double(nt) + double(nk) * (10 + local)),
+                       bytes_of(x) + bytes_of(O) + bytes_of(axes) + bytes_of(R) +
+                           bytes_of(q.index) + bytes_of(q.weight) + bytes_of(q.local) +
+                           bytes_of(q.args));
+  }
   AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "nearest_fields", [&] {
     const Fields<scalar_t> f{O.data_ptr<scalar_t>(),
                              axes.data_ptr<scalar_t>(),
@@ -200,8 +209,11 @@ torch::Tensor weighted_codes(NearestFields& fields) {
     return torch::bmm(fields.weight.unsqueeze(1), g).squeeze(1);
   }
   fields.args.sin_();
+  count_elementwise(fields.args, 1);
   const int64_t n = x.size(0), nk = x.size(1), nf2x3 = fields.args.size(2) * 3, G = 3 + nf2x3;
   auto codes = torch::empty({n, G}, x.options());
+  render::count_work(2.0 * double(n * nk * G), bytes_of(fields.weight) + bytes_of(x) +
+                                                   bytes_of(fields.args) + bytes_of(codes));
   AT_DISPATCH_FLOATING_TYPES(x.scalar_type(), "weighted_codes", [&] {
     const scalar_t* w = fields.weight.data_ptr<scalar_t>();
     const scalar_t* l = fields.local.data_ptr<scalar_t>();

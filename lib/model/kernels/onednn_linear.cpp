@@ -19,10 +19,12 @@ namespace {
 #ifdef TH_ONEDNN_DIRECT
 
 // oneDNN's inner-product primitive run on the tensors' own memory: x and y in their plain
-// row-major layout, the weights reordered to the layout the primitive asks for. The primitive,
-// its descriptors and the weights' layout are those LibTorch's mkldnn_linear builds, so the
-// products are the same to the bit (tests/model/test_precision.cpp); what it saves is the copy of
-// x into a oneDNN tensor and of the result out of one.
+// row-major layout, the weights reordered to the layout the primitive asks for. In fp32 the
+// primitive, its descriptors and the weights' layout are those LibTorch's mkldnn_linear builds,
+// so the products are the same to the bit (tests/model/test_precision.cpp); what it saves is the
+// copy of x into a oneDNN tensor and of the result out of one. In bf16 (x and w bf16, b fp32) the
+// same primitive takes bf16 operands, accumulates in fp32, adds the fp32 bias and rounds y to bf16
+// once.
 torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w,
                              const torch::Tensor& b) {
   const auto x = x2.contiguous();
@@ -34,11 +36,12 @@ torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w,
   using tag = dnnl::memory::format_tag;
   using desc = dnnl::memory::desc;
   const auto f32 = dnnl::memory::data_type::f32;
+  const auto type = x.scalar_type() == torch::kBFloat16 ? dnnl::memory::data_type::bf16 : f32;
   static const dnnl::engine engine(dnnl::engine::kind::cpu, 0);
   thread_local dnnl::stream stream(engine);
   try {
-    const desc src({M, K}, f32, tag::ab), dst({M, N}, f32, tag::ab);
-    const desc plain_weights({N, K}, f32, tag::ab), any_weights({N, K}, f32, tag::any);
+    const desc src({M, K}, type, tag::ab), dst({M, N}, type, tag::ab);
+    const desc plain_weights({N, K}, type, tag::ab), any_weights({N, K}, type, tag::any);
     const desc bias({N}, f32, tag::a);
     const auto prop = dnnl::prop_kind::forward_training;
     using ip = dnnl::inner_product_forward;
@@ -57,7 +60,7 @@ torch::Tensor onednn_product(const torch::Tensor& x2, const torch::Tensor& w,
         {DNNL_ARG_DST, dnnl::memory(dst, engine, y.data_ptr())}};
     torch::Tensor bc;
     if (b.defined()) {
-      bc = b.contiguous();
+      bc = b.to(torch::kFloat).contiguous();
       args.emplace(DNNL_ARG_BIAS, dnnl::memory(bias, engine, bc.data_ptr()));
     }
     ip(pd).execute(stream, args);
@@ -99,12 +102,15 @@ struct OneDnnLinear : torch::autograd::Function<OneDnnLinear> {
     torch::Tensor gx, gw, gb;
     if (ctx->needs_input_grad(0)) gx = onednn_product(g, w.t().contiguous(), {});
     if (ctx->needs_input_grad(1)) gw = torch::mm(g.t(), x2);
-    if (ctx->saved_data["bias"].toBool() && ctx->needs_input_grad(2)) gb = g.sum(0);
+    if (ctx->saved_data["bias"].toBool() && ctx->needs_input_grad(2))
+      gb = g.sum(0, false, torch::kFloat);
     return {gx, gw, gb};
   }
 };
 
 }  // namespace
+
+bool onednn_bf16() { return onednn_direct(); }
 
 bool onednn_direct() {
 #ifdef TH_ONEDNN_DIRECT
@@ -116,6 +122,11 @@ bool onednn_direct() {
 
 torch::Tensor onednn_linear(const torch::Tensor& x2, const torch::Tensor& w,
                             const torch::Tensor& b) {
+  TORCH_CHECK(x2.scalar_type() == w.scalar_type() &&
+                  (x2.scalar_type() == torch::kFloat ||
+                   (x2.scalar_type() == torch::kBFloat16 && onednn_bf16())),
+              "oneDNN product: x and w must be fp32 (or bf16 where onednn_bf16()), got ",
+              x2.scalar_type(), " and ", w.scalar_type());
   if (!cpu_kernels(x2.device()) || x2.size(0) == 0) return torch::nn::functional::linear(x2, w, b);
   const bool grad = torch::GradMode::is_enabled() &&
                     (x2.requires_grad() || w.requires_grad() || (b.defined() && b.requires_grad()));

@@ -13,9 +13,13 @@
 namespace th::model::kernels {
 
 // x2 (M, in) fp32, w (out, in), b (out) or undefined -> (M, out). Differentiable in x2, w and b
-// where autograd records.
+// where autograd records. Where onednn_bf16(), x2 and w may be bf16 (b fp32 or bf16): the
+// product accumulates in fp32 and y is bf16.
 torch::Tensor onednn_linear(const torch::Tensor& x2, const torch::Tensor& w,
                             const torch::Tensor& b);
+
+// Whether onednn_linear takes bf16 operands (only where it calls oneDNN directly).
+bool onednn_bf16();
 
 // Whether onednn_linear calls oneDNN directly (built with oneDNN 2's headers, LibTorch linking the
 // same library); false: it calls mkldnn_linear.

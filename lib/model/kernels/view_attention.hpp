@@ -9,8 +9,11 @@
 
 namespace th::model::kernels {
 
-// qr, kv: (N, V, d + C) -> (N, V, C). Differentiable in qr and kv.
-torch::Tensor view_attention(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d);
+// qr, kv: (N, V, d + C) -> (N, V, C), clamped at zero with `relu`. Differentiable in qr and kv.
+// The output has the operands' type: fp32 or float64, or bf16 (bf16 operands are read and the
+// output written in bf16; the attention itself runs in fp32, the output rounded once).
+torch::Tensor view_attention(const torch::Tensor& qr, const torch::Tensor& kv, int64_t d,
+                             bool relu = false);
 
 // softmax over the key views j of q_v . k_j / sqrt(d): q, k (N, V, d) -> (N, V, V), indexed
 // [n, v (query), j (key)]. LibTorch operations (any device).
