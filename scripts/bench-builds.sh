@@ -14,6 +14,8 @@
 #     forward, density-first forward, forward+backward and training-path points/s (best round);
 #   transhuman-bench-speed --sections view train --paths default: the 512x512 view at 64 samples
 #     (render + frame preparation) and the seconds per training step.
+# Environment: TH_BENCH_THREADS (default 1: OMP_NUM_THREADS and --threads), TH_BENCH_CHUNK
+# (default 4096), TH_BENCH_PATHS (default "default": bench-speed's paths, e.g. "fp32 bf16").
 # Prints and appends, per measure, the after/before ratio of each pair (throughput, or
 # before/after for times) and their median.
 set -euo pipefail
@@ -36,18 +38,22 @@ done
 logs="$out.logs"
 mkdir "$logs" || { echo "bench-builds: '$logs' exists; name another OUT_MD" >&2; exit 1; }
 
-export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1
+threads="${TH_BENCH_THREADS:-1}" chunk="${TH_BENCH_CHUNK:-4096}"
+read -r -a paths <<<"${TH_BENCH_PATHS:-default}"
+export OMP_NUM_THREADS="$threads" OPENBLAS_NUM_THREADS=1
 run_build() {  # build-dir tag pad
   local dir="$1" tag="$2" pad="$3"
   export GLIBC_TUNABLES="glibc.malloc.hugetlb=1:glibc.malloc.top_pad=$pad"
   for p in fp32 bf16; do
-    "$dir/transhuman-bench-model" --threads 1 --sections points --chunks 4096 --precision "$p" \
-      --rounds 3 --out '' >"$logs/$tag.model.$p.txt" 2>&1
+    "$dir/transhuman-bench-model" --threads "$threads" --sections points --chunks "$chunk" \
+      --precision "$p" --rounds 3 --out '' >"$logs/$tag.model.$p.txt" 2>&1
   done
   "$dir/transhuman-bench-speed" --config "$config" --checkpoint "$checkpoint" \
-    --sections view train --paths default --threads 1 --out '' >"$logs/$tag.speed.txt" 2>&1
+    --sections view train --paths "${paths[@]}" --threads "$threads" --out '' \
+    >"$logs/$tag.speed.txt" 2>&1
   unset GLIBC_TUNABLES
 }
+echo "threads $threads, chunk $chunk, bench-speed paths: ${paths[*]}"
 for ((i = 1; i <= pairs; i++)); do
   pad=$(( (RANDOM % 33) * 1048576 ))
   if ((i % 2)); then order=(before after); else order=(after before); fi
@@ -59,9 +65,10 @@ for ((i = 1; i <= pairs; i++)); do
   done
 done
 
-python3 - "$logs" "$pairs" "$out" <<'EOF'
+python3 - "$logs" "$pairs" "$out" "$threads" "$chunk" "${paths[@]}" <<'EOF'
 import re, statistics, sys, os, datetime
 logs, pairs, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+threads, chunk, paths = sys.argv[4], sys.argv[5], sys.argv[6:]
 
 def model(tag, p):
     best = None
@@ -74,16 +81,16 @@ def model(tag, p):
         sys.exit(f"bench-builds: no rates in {tag}.model.{p}.txt")
     return best
 
-def speed(tag):
+def speed(tag, path):
     view = step = None
     for line in open(os.path.join(logs, f"{tag}.speed.txt")):
         c = [x.strip() for x in line.strip().strip("|").split("|")]
-        if len(c) > 5 and c[0] == "64" and c[1] == "default":
+        if len(c) > 5 and c[0] == "64" and c[1] == path:
             view = float(c[4])
-        if len(c) >= 4 and c[0] == "default" and re.match(r"^[\d.]+$", c[1]):
+        if len(c) >= 4 and c[0] == path and re.match(r"^[\d.]+$", c[1]):
             step = float(c[1])
     if view is None or step is None:
-        sys.exit(f"bench-builds: no view or training row in {tag}.speed.txt")
+        sys.exit(f"bench-builds: no view or training row of path {path} in {tag}.speed.txt")
     return view, step
 
 names = ["forward, points/s", "density-first forward, points/s", "forward+backward, points/s",
@@ -94,13 +101,14 @@ for p in ("fp32", "bf16"):
         b = [model(f"{i}.before", p)[k] for i in range(1, pairs + 1)]
         a = [model(f"{i}.after", p)[k] for i in range(1, pairs + 1)]
         rows.append((p, name, b, a, [x / y for x, y in zip(a, b)]))
-for k, name in enumerate(["512x512 view at 64 samples, s", "training step at the config, s"]):
-    b = [speed(f"{i}.before")[k] for i in range(1, pairs + 1)]
-    a = [speed(f"{i}.after")[k] for i in range(1, pairs + 1)]
-    rows.append(("config", name, b, a, [x / y for x, y in zip(b, a)]))
+for path in paths:
+    for k, name in enumerate(["512x512 view at 64 samples, s", "training step at the config, s"]):
+        b = [speed(f"{i}.before", path)[k] for i in range(1, pairs + 1)]
+        a = [speed(f"{i}.after", path)[k] for i in range(1, pairs + 1)]
+        rows.append((f"config ({path})", name, b, a, [x / y for x, y in zip(b, a)]))
 
 fmt = lambda v: ", ".join(f"{x:,.0f}" if x > 100 else f"{x:.3f}" for x in v)
-lines = [f"### {pairs} pairs, {datetime.date.today()}, load at the end {open('/proc/loadavg').read().split()[0]}", "",
+lines = [f"### {pairs} pairs, {datetime.date.today()}, {threads} thread(s), chunk {chunk}, load at the end {open('/proc/loadavg').read().split()[0]}", "",
          "| precision | measure | before | after | after/before per pair (times: before/after) | median | lower after |",
          "|---|---|---|---|---|---|---|"]
 for p, name, b, a, r in rows:
