@@ -7,6 +7,7 @@
 #include <c10/util/ThreadLocalDebugInfo.h>
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
@@ -19,6 +20,7 @@
 
 #include "core/error.hpp"
 #include "core/torch_compat.hpp"
+#include "render/volume.hpp"
 
 namespace th::bench {
 
@@ -28,6 +30,59 @@ inline std::string fmt(double v, int prec = 1) {
   std::ostringstream s;
   s << std::fixed << std::setprecision(prec) << v;
   return s.str();
+}
+
+// A profile's stages with their parts ("dparf.fields" inside "dparf") added into the stage:
+// each stage's whole time and work, then (for the roofline) each part's own.
+struct StageRow {
+  std::string stage;
+  double seconds = 0;
+  render::Work work;
+  bool part = false;
+};
+inline std::vector<StageRow> stage_rows(const render::Profile& p, bool with_parts) {
+  std::vector<StageRow> rows;
+  auto row = [&](const std::string& name, bool part) -> StageRow& {
+    for (auto& r : rows)
+      if (r.stage == name) return r;
+    rows.push_back({name, 0, {}, part});
+    return rows.back();
+  };
+  for (const auto& [stage, sec] : p.seconds) {
+    const auto dot = stage.find('.');
+    const auto it = p.work.find(stage);
+    const render::Work w = it == p.work.end() ? render::Work{} : it->second;
+    auto& top = row(stage.substr(0, dot), false);
+    top.seconds += sec;
+    top.work.flops += w.flops;
+    top.work.bytes += w.bytes;
+    if (dot != std::string::npos && with_parts) {
+      auto& part = row(stage, true);
+      part.seconds += sec;
+      part.work = w;
+    }
+  }
+  // Stages in name order, each followed by its parts ("dparf" < "dparf.codes" < "fdi").
+  std::sort(rows.begin(), rows.end(), [](auto& a, auto& b) { return a.stage < b.stage; });
+  return rows;
+}
+
+// "dparf 1.04 (fields 0.29, codes 0.28), fdi 2.70": each stage's time, its parts' in brackets.
+inline std::string stage_seconds(const render::Profile& p) {
+  std::string out;
+  bool open = false;
+  for (const auto& row : stage_rows(p, true)) {
+    if (row.part) {
+      out += (open ? ", " : " (") + row.stage.substr(row.stage.find('.') + 1) + " " +
+             fmt(row.seconds, 2);
+      open = true;
+      continue;
+    }
+    if (open) out += ")";
+    open = false;
+    out += (out.empty() ? "" : ", ") + row.stage + " " + fmt(row.seconds, 2);
+  }
+  return open ? out + ")" : out;
 }
 
 inline double seconds_since(Clock::time_point t) {

@@ -41,6 +41,7 @@ using bench::Clock;
 using bench::fmt;
 using bench::PeakMemory;
 using bench::seconds_since;
+using bench::stage_rows;
 namespace fs = std::filesystem;
 
 namespace {
@@ -221,7 +222,8 @@ double product_limit(const model::Products& products, int64_t rows) {
 }
 
 void shares_into(std::string& s, const render::Profile& p, double total) {
-  std::vector<std::pair<std::string, double>> v(p.seconds.begin(), p.seconds.end());
+  std::vector<std::pair<std::string, double>> v;
+  for (const auto& row : stage_rows(p, false)) v.emplace_back(row.stage, row.seconds);
   std::sort(v.begin(), v.end(), [](auto& a, auto& b) { return a.second > b.second; });
   double listed = 0;
   for (const auto& [k, sec] : v) {
@@ -576,10 +578,12 @@ int run(int argc, char** argv) {
           "the chunk's rows in the path's precision; memory bandwidth, a stream triad " +
           fmt(bandwidth, 1) +
           " GB/s. Bound: memory where the stage's intensity times the bandwidth is below the "
-          "product limit; share: the achieved rate over the bound's rate.");
+          "product limit; share: the achieved rate over the bound's rate. ns/point: the stage's "
+          "wall time per point on the run's threads. A stage's parts follow it (dparf.fields: "
+          "the nearest fields inside DPaRF); the stage's row holds them all.");
       r.line("");
       r.line(
-          "| precision | chunk | stage | kFLOP/point | bytes/point | FLOP/byte | seconds | "
+          "| precision | chunk | stage | kFLOP/point | bytes/point | FLOP/byte | ns/point | "
           "GFLOP/s | GB/s | product limit GFLOP/s | bound | share of bound |");
       r.line("|---|---|---|---|---|---|---|---|---|---|---|---|");
       for (size_t path = 0; path < precisions.size(); ++path) {
@@ -592,19 +596,18 @@ int run(int argc, char** argv) {
         const auto products = products_of(precisions[path]);
         const double limit = product_limit(products, chunk * scene.in.ref_images.size(0));
         const double points = fastest->fwd * fastest->fwd_s;
-        for (const auto& [stage, sec] : fastest->profile.seconds) {
-          const auto it = fastest->profile.work.find(stage);
-          if (sec <= 0 || it == fastest->profile.work.end()) continue;
-          const auto& w = it->second;
+        for (const auto& [stage, sec, w, part] : stage_rows(fastest->profile, true)) {
+          if (sec <= 0 || w.flops + w.bytes <= 0) continue;
           const double intensity = w.bytes > 0 ? w.flops / w.bytes : 0;
           const bool memory = intensity * bandwidth < limit;
           const double gflops = w.flops / sec / 1e9, gbytes = w.bytes / sec / 1e9;
           const double share = memory ? gbytes / bandwidth : gflops / limit;
-          r.line("| " + precisions[path] + " | " + std::to_string(chunk) + " | " + stage + " | " +
-                 fmt(w.flops / points / 1e3, 1) + " | " + fmt(w.bytes / points, 0) + " | " +
-                 fmt(intensity, 2) + " | " + fmt(sec, 2) + " | " + fmt(gflops, 1) + " | " +
-                 fmt(gbytes, 1) + " | " + fmt(limit, 1) + " | " + (memory ? "memory" : "products") +
-                 " | " + fmt(100 * share, 0) + "% |");
+          r.line("| " + precisions[path] + " | " + std::to_string(chunk) + " | " +
+                 (part ? "&nbsp;&nbsp;" : "") + stage + " | " + fmt(w.flops / points / 1e3, 1) +
+                 " | " + fmt(w.bytes / points, 0) + " | " + fmt(intensity, 2) + " | " +
+                 fmt(sec / points * 1e9, 0) + " | " + fmt(gflops, 1) + " | " + fmt(gbytes, 1) +
+                 " | " + fmt(limit, 1) + " | " + (memory ? "memory" : "products") + " | " +
+                 fmt(100 * share, 0) + "% |");
         }
       }
       {

@@ -165,15 +165,13 @@ void view_section(const Setup& setup, Rows& rows, const std::vector<int>& view_s
              std::to_string(dacc.gt(0.01).sum().item<int64_t>()) + " rays above 0.01)";
     }
     const auto& st = img.stats;
-    std::string stages;
-    for (const auto& [stage, seconds] : profile.seconds)
-      stages += stage + " " + fmt(seconds, 2) + ", ";
+    const std::string stages = bench::stage_seconds(profile);
     rows.add(std::to_string(samples), sec + prepare,
              std::to_string(samples) + " | " + setup.path + " | " + fmt(sec, 2) + " | " +
                  fmt(prepare, 2) + " | " + fmt(sec + prepare, 2) + " | " +
                  std::to_string(st.density_points) + " | " + std::to_string(st.color_points) +
                  " | " + std::to_string(st.terminated_points) + " | " + fmt(mem.tensor_mib(), 0) +
-                 " | " + diff + " | " + stages.substr(0, stages.size() - 2));
+                 " | " + diff + " | " + stages);
   }
 }
 

@@ -6,6 +6,7 @@
 #include "model/kernels/nearest_fields.hpp"
 #include "model/spc.hpp"
 #include "model/transhe.hpp"
+#include "render/volume.hpp"
 
 namespace th::model {
 
@@ -63,20 +64,29 @@ torch::Tensor TokenFieldsImpl::forward(const HumanStage& human, const torch::Ten
   const bool relative = dparf.coordinate == Coordinate::relative;
   const bool fused = dparf.pe_rounding == PeRounding::fused;  // [parity] (METHOD 3.3)
   // The Nk nearest fields k, their weights w_k and (relative) the local coordinates' codes.
-  auto fields = kernels::nearest_fields(
-      xs, stage.frames.origins, stage.frames.rotations,
-      {dparf.nk, dparf.softmax_temperature, relative, dparf.pe_freqs, fused});
+  kernels::NearestFields fields;
+  {
+    render::ScopedTimer timer("dparf.fields");
+    fields = kernels::nearest_fields(
+        xs, stage.frames.origins, stage.frames.rotations,
+        {dparf.nk, dparf.softmax_temperature, relative, dparf.pe_freqs, fused});
+  }
   torch::Tensor g;  // sum_k w_k g_k
-  if (relative)
-    g = kernels::weighted_codes(fields);
-  else if (dparf.coordinate == Coordinate::absolute)
-    g = kernels::sincos_encoding(xs, dparf.pe_freqs, true, fused);  // PE(xs), the same for every k
+  {
+    render::ScopedTimer timer("dparf.codes");
+    if (relative)
+      g = kernels::weighted_codes(fields);
+    else if (dparf.coordinate == Coordinate::absolute)
+      g = kernels::sincos_encoding(xs, dparf.pe_freqs, true, fused);  // PE(xs), for every k
+  }
   kernels::GatherEpilogue epilogue{{}, true, products.between(stage.table.scalar_type())};
   if (g.defined()) {  // fc_0's coordinate part, added to every view's row
+    render::ScopedTimer timer("dparf.coordinates");
     const auto& w = fc_0->weight;
     epilogue.addend = products.linear_fp32(g, w.narrow(1, w.size(1) - g.size(1), g.size(1)));
   }
   // s_v = relu(table rows + coordinate part), in the type FDI's products read
+  render::ScopedTimer timer("dparf.gather");
   return kernels::weighted_gather(stage.table, {fields.index, fields.weight}, stage.table_grad_sink,
                                   epilogue)
       .view({xs.size(0), -1, 256});

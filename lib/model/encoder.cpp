@@ -2,6 +2,8 @@
 
 #include <ATen/Parallel.h>
 
+#include <algorithm>
+
 #include "core/error.hpp"
 #include "io/npy.hpp"
 #include "model/kernels/work.hpp"
@@ -288,6 +290,48 @@ std::pair<torch::Tensor, torch::Tensor> PixelWindows::pixels(
   return {torch::cat(uv), torch::cat(view)};
 }
 
+LevelFootprint PixelWindows::footprint(const PixelGeometry& g,
+                                       const torch::TensorOptions& options) const {
+  LevelFootprint f(g.level_sizes.size(), std::vector<TexelRect>(offset.size()));
+  std::vector<float> corners;
+  std::vector<int64_t> views;
+  for (size_t v = 0; v < offset.size(); ++v) {
+    if (w[v] <= 0 || h[v] <= 0) continue;
+    corners.insert(corners.end(),
+                   {float(x0[v]), float(y0[v]), float(x0[v] + w[v] - 1), float(y0[v] + h[v] - 1)});
+    views.insert(views.end(), {int64_t(v), int64_t(v)});
+  }
+  if (views.empty()) return f;
+  const int64_t n = int64_t(views.size());
+  const auto uv = torch::from_blob(corners.data(), {n, 2}, torch::kFloat).to(options);
+  const auto view = torch::from_blob(views.data(), {n}, torch::kLong).clone();
+  const auto taps = g.stacked_level_taps(uv, view);
+  const auto index = taps.index.contiguous();
+  const int64_t T_ = index.size(1);
+  const int64_t* idx = index.data_ptr<int64_t>();
+  std::vector<int64_t> level_offset;
+  int64_t rows = 0;
+  for (const auto& [lh, lw] : g.level_sizes) {
+    level_offset.push_back(rows);
+    rows += g.views * lh * lw;
+  }
+  for (int64_t m = 0; m < n; ++m)
+    for (int64_t k = 0; k < T_; ++k) {
+      const int64_t i = idx[m * T_ + k];
+      size_t l = level_offset.size() - 1;
+      while (l > 0 && i < level_offset[l]) --l;
+      const auto [lh, lw] = g.level_sizes[l];
+      const int64_t r = i - level_offset[l] - views[m] * lh * lw, y = r / lw, x = r % lw;
+      auto& t = f[l][views[m]];
+      const bool first = t.x1 <= t.x0;
+      t.x0 = first ? x : std::min(t.x0, x);
+      t.y0 = first ? y : std::min(t.y0, y);
+      t.x1 = first ? x + 1 : std::max(t.x1, x + 1);
+      t.y1 = first ? y + 1 : std::max(t.y1, y + 1);
+    }
+  return f;
+}
+
 std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv,
                                                   const torch::Tensor& view, int64_t H,
                                                   int64_t W) const {
@@ -322,16 +366,43 @@ std::pair<Taps, torch::Tensor> PixelWindows::taps(const torch::Tensor& uv,
 }
 
 PixelReadout EncoderImpl::make_readout(const EncodedViews& enc, const torch::Tensor& weight,
-                                       const torch::Tensor& bias) const {
+                                       const torch::Tensor& bias,
+                                       const LevelFootprint* footprint) const {
   TORCH_CHECK(weight.dim() == 2 && weight.size(1) == pixel_channels(),
               "readout weight must be (Cout, ", pixel_channels(), "), got ", weight.sizes());
+  TORCH_CHECK(!footprint || footprint->size() == enc.levels.size(),
+              "readout footprint: one entry per level expected");
   PixelReadout r;
-  std::vector<torch::Tensor> tables;
-  for (size_t l = 0; l < enc.levels.size(); ++l) {
-    const auto w = weight.slice(1, kLevelBegin[l], kLevelBegin[l + 1]);
-    tables.push_back(torch::mm(to_table(enc.levels[l]), w.t()));
+  if (footprint) {  // each level's rectangles into their rows of one stacked table
+    int64_t rows = 0;
+    for (const auto& level : enc.levels) rows += level.size(0) * level.size(2) * level.size(3);
+    r.table = torch::empty({rows, weight.size(0)}, enc.levels[0].options());
+    int64_t offset = 0;
+    for (size_t l = 0; l < enc.levels.size(); ++l) {
+      const auto& level = enc.levels[l];
+      const int64_t V = level.size(0), h = level.size(2), w = level.size(3);
+      const auto wt = weight.slice(1, kLevelBegin[l], kLevelBegin[l + 1]).t();
+      const auto maps = r.table.narrow(0, offset, V * h * w).view({V, h, w, -1});
+      for (int64_t v = 0; v < V && v < int64_t((*footprint)[l].size()); ++v) {
+        const auto& t = (*footprint)[l][v];
+        if (t.x1 <= t.x0 || t.y1 <= t.y0) continue;
+        const auto texels = level[v].slice(1, t.y0, t.y1).slice(2, t.x0, t.x1);  // (C, hh, ww)
+        maps[v]
+            .slice(0, t.y0, t.y1)
+            .slice(1, t.x0, t.x1)
+            .copy_(torch::mm(texels.permute({1, 2, 0}).reshape({-1, level.size(1)}), wt)
+                       .view({t.y1 - t.y0, t.x1 - t.x0, -1}));
+      }
+      offset += V * h * w;
+    }
+  } else {
+    std::vector<torch::Tensor> tables;
+    for (size_t l = 0; l < enc.levels.size(); ++l) {
+      const auto w = weight.slice(1, kLevelBegin[l], kLevelBegin[l + 1]);
+      tables.push_back(torch::mm(to_table(enc.levels[l]), w.t()));
+    }
+    r.table = torch::cat(tables, 0);
   }
-  r.table = torch::cat(tables, 0);
   r.image_table = to_table(enc.images).detach();
   r.bias = bias;
   if (upsample_color) {

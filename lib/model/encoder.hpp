@@ -120,6 +120,13 @@ struct PixelReadout {
 
 // One rectangle of pixels per view, [x0, x0 + w) x [y0, y0 + h), whose pixels are stacked view
 // after view (row-major within a view) in a table of full-resolution values.
+// A rectangle of texels of one view's level map: [x0, x1) x [y0, y1).
+struct TexelRect {
+  int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+// Per level, per view: the texels a readout table needs (PixelWindows::footprint).
+using LevelFootprint = std::vector<std::vector<TexelRect>>;
+
 struct PixelWindows {
   std::vector<int64_t> x0, y0, w, h, offset;  // per view; offset: the view's first row
   int64_t rows() const { return offset.empty() ? 0 : offset.back() + w.back() * h.back(); }
@@ -133,6 +140,10 @@ struct PixelWindows {
   // point outside read row 0 with weight 0.
   std::pair<Taps, torch::Tensor> taps(const torch::Tensor& uv, const torch::Tensor& view, int64_t H,
                                       int64_t W) const;
+  // The texels of each level map that the windows' pixels read through the level taps
+  // (PixelGeometry::stacked_level_taps): per level and view, the smallest rectangle holding
+  // the taps of the window's corner pixels (the taps move monotonically with the pixel).
+  LevelFootprint footprint(const PixelGeometry& g, const torch::TensorOptions& options) const;
 };
 
 // A readout in window form (inference, model/pixels.hpp): y at every pixel of the windows,
@@ -159,8 +170,12 @@ class EncoderImpl : public torch::nn::Module {
   torch::Tensor sample_pixel_features(const EncodedViews& enc, const Taps& level_taps,
                                       const Taps& image_taps) const;
   // Per-level precomputation of y = W p + b. weight: (Cout, 384), bias: (Cout).
+  // footprint (optional): only the table rows of those texels are computed, the others left
+  // unwritten (inference: the window form reads no other row, and untouched pages are never
+  // allocated).
   PixelReadout make_readout(const EncodedViews& enc, const torch::Tensor& weight,
-                            const torch::Tensor& bias) const;
+                            const torch::Tensor& bias,
+                            const LevelFootprint* footprint = nullptr) const;
 
   // METHOD 3.1 painting: holder features at the projections of the body vertices, zero where
   // the vertex is invisible. uv: (V, Nv, 2), visibility: (V, Nv) -> (V, Nv, holder channels).

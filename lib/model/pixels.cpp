@@ -1,5 +1,7 @@
 #include "model/pixels.hpp"
 
+#include <optional>
+
 #include "geometry/camera.hpp"
 #include "model/encoder.hpp"
 #include "model/fdi.hpp"
@@ -7,6 +9,7 @@
 #include "model/kernels/forms.hpp"
 #include "model/kernels/gather.hpp"
 #include "render/chunks.hpp"
+#include "render/volume.hpp"
 
 namespace th::model {
 
@@ -45,11 +48,13 @@ PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, c
   WindowReadouts px;
   px.windows = body_windows(geometry, vertices, cull_distance, enc.geometry);
   const auto [uv, view] = px.windows.pixels(enc.images.options());
-  // One readout at a time, so that a single level table exists at any moment.
-  px.alpha = to_window(encoder.make_readout(enc, alpha.weight, alpha.bias), alpha.weight,
-                       alpha.bias, px.windows, uv, view, enc.geometry);
+  // One readout at a time, so that a single level table exists at any moment; of each table
+  // only the rows the windows read.
+  const auto footprint = px.windows.footprint(enc.geometry, uv.options());
+  px.alpha = to_window(encoder.make_readout(enc, alpha.weight, alpha.bias, &footprint),
+                       alpha.weight, alpha.bias, px.windows, uv, view, enc.geometry);
   px.color =
-      to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias),
+      to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias, &footprint),
                 heads.readout_weight, heads.readout_bias, px.windows, uv, view, enc.geometry);
   px.enc = enc;  // for points outside the windows
   return px;
@@ -60,10 +65,13 @@ namespace {
 torch::Tensor read_windows(const WindowReadouts& px, const WindowReadout& readout,
                            const EncoderImpl& encoder, const torch::Tensor& uv,
                            const kernels::GatherEpilogue& epilogue) {
+  std::optional<render::ScopedTimer> timer(std::in_place, "sampling.taps");
   const auto [flat, view] = PixelGeometry::point_view_rows(uv);
   const auto& g = px.enc.geometry;
   const auto [taps, inside] = px.windows.taps(flat, view, g.height, g.width);
+  timer.emplace("sampling.gather");
   auto out = kernels::weighted_gather(readout.table, taps, {}, epilogue);
+  timer.emplace("sampling.outside");
   if (!inside.all().item<bool>()) {  // outside the windows: the layer on p_v read from the levels
     const auto idx = (~inside).nonzero().flatten();
     const auto f = flat.index_select(0, idx), v = view.index_select(0, idx);
@@ -83,10 +91,13 @@ torch::Tensor sample_pixels(const PixelStage& stage, const EncoderImpl& encoder,
                             c10::optional<c10::ScalarType> dtype) {
   const bool alpha = layer == PixelLayer::appearance;
   if (const auto* px = std::get_if<PixelReadouts>(&stage)) {
+    std::optional<render::ScopedTimer> timer(std::in_place, "sampling.taps");
     const auto [flat, view] = PixelGeometry::point_view_rows(uv);
+    const auto level_taps = px->geometry.stacked_level_taps(flat, view);
+    const auto image_taps = px->geometry.image_taps(flat, view);
+    timer.emplace("sampling.gather");
     auto out = (alpha ? px->alpha : px->color)
-                   .sample(px->geometry.stacked_level_taps(flat, view),
-                           px->geometry.image_taps(flat, view))
+                   .sample(level_taps, image_taps)
                    .view({uv.size(0), uv.size(1), -1});
     if (relu) out = out.relu();
     return dtype ? out.to(*dtype) : out;

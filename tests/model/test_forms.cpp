@@ -69,11 +69,24 @@ TEST_CASE("profiling: each stage's time, the method's results unchanged", "[mode
   }
   CHECK(profile.open.empty());  // every timer closed
   CHECK(profile.stages.empty());
-  // Each per-point stage counts the work of its operations.
-  for (const char* stage : {"dparf", "sampling", "fdi", "heads"}) {
+  // Each per-point stage counts the work of its operations, in itself or in its parts.
+  for (const std::string stage : {"dparf", "sampling", "fdi", "heads"}) {
     INFO(stage);
-    CHECK(profile.work[stage].flops > 0);
-    CHECK(profile.work[stage].bytes > 0);
+    render::Work w;
+    for (const auto& [name, work] : profile.work)
+      if (name == stage || name.rfind(stage + ".", 0) == 0) {
+        w.flops += work.flops;
+        w.bytes += work.bytes;
+      }
+    CHECK(w.flops > 0);
+    CHECK(w.bytes > 0);
+  }
+  // The parts of DPaRF and of the pixel sampling, timed inside them.
+  for (const char* part :
+       {"dparf.fields", "dparf.codes", "dparf.gather", "sampling.taps", "sampling.gather"}) {
+    INFO(part);
+    CHECK(profile.seconds.count(part) == 1);
+    CHECK(profile.work[part].bytes > 0);
   }
 
   // Without a profile, nothing more is recorded.

@@ -3,11 +3,14 @@
 // forms.
 #include <torch/torch.h>
 
+#include <algorithm>
 #include <array>
 #include <catch2/catch.hpp>
+#include <cmath>
 
 #include "geometry/camera.hpp"
 #include "model/frame_fixture.hpp"
+#include "model/kernels/encoding.hpp"
 #include "model/kernels/forms.hpp"
 #include "model/kernels/nearest_fields.hpp"
 #include "model/kernels/view_attention.hpp"
@@ -300,6 +303,38 @@ TEST_CASE("the one-pass DPaRF query equals its LibTorch form", "[model][shortcut
   }
 }
 
+TEST_CASE("the DPaRF query's encoding arguments round as the method says, on every CPU",
+          "[model][shortcuts]") {
+  // The arguments l f + phase of the local coordinates' encoding: one rounding (fma) when fused,
+  // else the product rounded and then the phase added; the same bits whatever vector clone runs.
+  torch::manual_seed(9);
+  const int64_t nt = 40, n = 300, nk = 5, nf = 10;
+  TokenFrames frames{torch::randn({nt, 3}) * 0.3,
+                     torch::eye(3).expand({nt, 3, 3}) + 0.2 * torch::randn({nt, 3, 3})};
+  const auto xs = torch::randn({n, 3}) * 0.4;
+  const auto freqs = kernels::pe_frequencies(nf, xs.options()).contiguous();
+  const auto phases = kernels::pe_phases(nf, xs.options()).contiguous();
+  for (const bool fused : {true, false}) {
+    const auto q =
+        kernels::nearest_fields(xs, frames.origins, frames.rotations, {nk, 0.5, true, nf, fused});
+    const auto l = q.local.contiguous();
+    auto expected = torch::empty_like(q.args);
+    const float* lp = l.data_ptr<float>();
+    const float* fp = freqs.data_ptr<float>();
+    const float* pp = phases.data_ptr<float>();
+    float* e = expected.data_ptr<float>();
+    for (int64_t m = 0; m < n * nk; ++m)
+      for (int64_t j = 0; j < 2 * nf; ++j)
+        for (int i = 0; i < 3; ++i) {
+          const float x = lp[m * 3 + i];
+          volatile float product = x * fp[j];  // rounded on its own
+          e[(m * 2 * nf + j) * 3 + i] = fused ? std::fma(x, fp[j], pp[j]) : product + pp[j];
+        }
+    INFO("fused " << fused);
+    CHECK(torch::equal(q.args, expected));
+  }
+}
+
 TEST_CASE("readout windows sample a full-resolution map as grid_sample does",
           "[model][sampling][windows]") {
   torch::manual_seed(11);
@@ -349,6 +384,60 @@ TEST_CASE("readout windows sample a full-resolution map as grid_sample does",
   CHECK(max_abs(fast.index({inside}), direct.index({inside})) < 1e-12);
   CHECK(fast.index({~inside}).abs().max().item<double>() == 0);
   CHECK(taps.weight.index({~inside}).abs().max().item<double>() == 0);
+}
+
+TEST_CASE("a readout table computed only where the windows read gives the same window values",
+          "[model][sampling][windows]") {
+  torch::manual_seed(12);
+  torch::NoGradGuard no_grad;
+  Encoder encoder(EncoderConfig{}, true, 32);
+  const int64_t V = 3, H = 48, W = 56;
+  const auto enc = encoder->forward(torch::rand({V, 3, H, W}));
+  const auto weight = 0.1 * torch::randn({16, encoder->pixel_channels()});
+  const auto bias = torch::randn({16});
+  PixelWindows win;
+  // An interior rectangle, one touching the right and bottom borders, the whole image.
+  const std::vector<std::array<int64_t, 4>> rects{{5, 7, 13, 9}, {40, 30, 16, 18}, {0, 0, W, H}};
+  int64_t offset = 0;
+  for (const auto& [x0, y0, w, h] : rects) {
+    win.x0.push_back(x0), win.y0.push_back(y0), win.w.push_back(w), win.h.push_back(h),
+        win.offset.push_back(offset);
+    offset += w * h;
+  }
+  const auto [uv, view] = win.pixels(torch::TensorOptions().dtype(torch::kFloat));
+  const auto footprint = win.footprint(enc.geometry, uv.options());
+  const auto level_taps = enc.geometry.stacked_level_taps(uv, view);
+  const auto image_taps = enc.geometry.image_taps(uv, view);
+  // Every tap of every window pixel lies in its level's rectangle.
+  const auto idx = level_taps.index.contiguous();
+  int64_t level_offset = 0, outside = 0, column = 0;
+  for (size_t l = 0; l < enc.geometry.level_sizes.size(); ++l) {
+    const auto [h, w] = enc.geometry.level_sizes[l];
+    const int64_t taps = (h == H && w == W) ? 4 : 9;
+    const auto r = idx.slice(1, column, column + taps) - level_offset - view.unsqueeze(1) * h * w;
+    const auto y = r.div(w, "floor"), x = r.remainder(w);
+    for (int64_t v = 0; v < V; ++v) {
+      const auto& t = footprint[l][v];
+      const auto mine = (view == v).unsqueeze(1).expand_as(x);
+      outside +=
+          (mine & ((x < t.x0) | (x >= t.x1) | (y < t.y0) | (y >= t.y1))).sum().item<int64_t>();
+    }
+    // the whole image's window needs its whole map; the small one far less
+    CHECK(footprint[l][2].x0 == 0);
+    CHECK(footprint[l][2].x1 == w);
+    CHECK((footprint[l][0].x1 - footprint[l][0].x0) * (footprint[l][0].y1 - footprint[l][0].y0) <
+          h * w / 2);
+    level_offset += V * h * w;
+    column += taps;
+  }
+  CHECK(outside == 0);
+  // The window values from the partial table are those of the whole one.
+  const auto whole = encoder->make_readout(enc, weight, bias);
+  auto part = encoder->make_readout(enc, weight, bias, &footprint);
+  CHECK(part.table.sizes() == whole.table.sizes());
+  // (Products of fewer rows may sum in another order: equal up to float rounding.)
+  const auto a = part.sample(level_taps, image_taps), b = whole.sample(level_taps, image_taps);
+  CHECK(max_abs(a, b) <= 1e-6 * std::max(1.0, b.abs().max().item<double>()));
 }
 
 TEST_CASE("body windows contain the projection of every point within the culling distance",

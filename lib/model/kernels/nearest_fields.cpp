@@ -39,8 +39,8 @@ struct Outputs {
 };
 
 // Squared distances of one point to all nt origins, given per axis: a loop the compiler
-// vectorises, with the same operations per origin as a scalar loop (the float clones enable no
-// FMA, so no rounding changes).
+// vectorises, with the same operations per origin as a scalar loop (this file is compiled
+// without floating-point contraction, so no clone turns a product and a sum into one FMA).
 // The point comes as three values, not an array by reference: its address would escape to the
 // out-of-line clones and every store through an output pointer would reload it.
 template <class T>
@@ -65,6 +65,50 @@ void squared_distances_any(float x, float y, float z, const float* axes, int64_t
 void squared_distances_any(double x, double y, double z, const double* axes, int64_t nt,
                            double* d2) {
   squared_distances<double>(x, y, z, axes, nt, d2);
+}
+
+// The arguments of one field's encoding, a[j * 3 + i] = l[i] * freqs[j] + phases[j], j < nf2:
+// rounded once (fma) when fused [parity], else the product rounded and then the phase added.
+// A clone per vector width: the avx512f and haswell clones have the FMA instruction, where the
+// baseline build would call the C library's fma once per argument.
+// (The builtins, not std::fma: its out-of-line wrapper is not inlined into the haswell clone.)
+inline __attribute__((always_inline)) float fused_multiply_add(float a, float b, float c) {
+  return __builtin_fmaf(a, b, c);
+}
+inline __attribute__((always_inline)) double fused_multiply_add(double a, double b, double c) {
+  return __builtin_fma(a, b, c);
+}
+template <class T>
+inline __attribute__((always_inline)) void field_arguments(T l0, T l1, T l2,
+                                                           const T* __restrict freqs,
+                                                           const T* __restrict phases, int64_t nf2,
+                                                           bool fused, T* __restrict a) {
+  if (fused) {
+    for (int64_t j = 0; j < nf2; ++j) {
+      a[3 * j] = fused_multiply_add(l0, freqs[j], phases[j]);
+      a[3 * j + 1] = fused_multiply_add(l1, freqs[j], phases[j]);
+      a[3 * j + 2] = fused_multiply_add(l2, freqs[j], phases[j]);
+    }
+  } else {
+    for (int64_t j = 0; j < nf2; ++j) {
+      a[3 * j] = l0 * freqs[j] + phases[j];
+      a[3 * j + 1] = l1 * freqs[j] + phases[j];
+      a[3 * j + 2] = l2 * freqs[j] + phases[j];
+    }
+  }
+}
+__attribute__((target_clones("avx512f", "arch=haswell", "default"))) void field_arguments_f(
+    float l0, float l1, float l2, const float* freqs, const float* phases, int64_t nf2, bool fused,
+    float* a) {
+  field_arguments<float>(l0, l1, l2, freqs, phases, nf2, fused, a);
+}
+void field_arguments_any(float l0, float l1, float l2, const float* freqs, const float* phases,
+                         int64_t nf2, bool fused, float* a) {
+  field_arguments_f(l0, l1, l2, freqs, phases, nf2, fused, a);
+}
+void field_arguments_any(double l0, double l1, double l2, const double* freqs, const double* phases,
+                         int64_t nf2, bool fused, double* a) {
+  field_arguments<double>(l0, l1, l2, freqs, phases, nf2, fused, a);
 }
 
 // Points [begin, end): the nk nearest origins (exact squared distances, nearest first, ties by
@@ -105,21 +149,41 @@ void nearest_fields_rows(const T* xs, Fields<T> f, Outputs<T> out, int64_t begin
       const T* R = f.rotations + 9 * t;
       T* l = out.local + (n * nk + k) * 3;
       for (int i = 0; i < 3; ++i) l[i] = d[0] * R[i] + d[1] * R[3 + i] + d[2] * R[6 + i];
-      T* a = out.args + (n * nk + k) * nf2 * 3;
-      for (int64_t j = 0; j < nf2; ++j)
-        for (int i = 0; i < 3; ++i) {
-          if (f.fused) {  // rounded once, as the reference's addcmul [parity]
-            a[j * 3 + i] = std::fma(l[i], f.freqs[j], f.phases[j]);
-          } else {
-            const T product = l[i] * f.freqs[j];  // rounded, then the phase added
-            a[j * 3 + i] = product + f.phases[j];
-          }
-        }
+      field_arguments_any(l[0], l[1], l[2], f.freqs, f.phases, nf2, f.fused,
+                          out.args + (n * nk + k) * nf2 * 3);
     }
     T sum = 0;
     for (int64_t k = 0; k < nk; ++k) sum += (w[k] = std::exp(w[k] - max_logit));
     for (int64_t k = 0; k < nk; ++k) w[k] /= sum;
   }
+}
+
+// One point's code: out = sum_k w[k] (local_k, sin args_k), k < nk, in the order k = 0, 1, ...
+template <class T>
+inline __attribute__((always_inline)) void weighted_code(T* __restrict out, const T* __restrict w,
+                                                         const T* __restrict local,
+                                                         const T* __restrict sines, int64_t nk,
+                                                         int64_t nf2x3) {
+  for (int64_t j = 0; j < 3 + nf2x3; ++j) out[j] = 0;
+  for (int64_t k = 0; k < nk; ++k) {
+    const T wk = w[k];
+    const T* __restrict lk = local + k * 3;
+    const T* __restrict sk = sines + k * nf2x3;
+    for (int j = 0; j < 3; ++j) out[j] += wk * lk[j];
+    for (int64_t j = 0; j < nf2x3; ++j) out[3 + j] += wk * sk[j];
+  }
+}
+__attribute__((target_clones("avx512f", "avx2", "default"))) void weighted_code_f(
+    float* out, const float* w, const float* local, const float* sines, int64_t nk, int64_t nf2x3) {
+  weighted_code<float>(out, w, local, sines, nk, nf2x3);
+}
+void weighted_code_any(float* out, const float* w, const float* local, const float* sines,
+                       int64_t nk, int64_t nf2x3) {
+  weighted_code_f(out, w, local, sines, nk, nf2x3);
+}
+void weighted_code_any(double* out, const double* w, const double* local, const double* sines,
+                       int64_t nk, int64_t nf2x3) {
+  weighted_code<double>(out, w, local, sines, nk, nf2x3);
 }
 
 // The same query in LibTorch operations (other devices, gradients with respect to the points):
@@ -220,17 +284,8 @@ torch::Tensor weighted_codes(NearestFields& fields) {
     const scalar_t* s = fields.args.data_ptr<scalar_t>();
     scalar_t* c = codes.data_ptr<scalar_t>();
     at::parallel_for(0, n, 256, [&](int64_t begin, int64_t end) {
-      for (int64_t i = begin; i < end; ++i) {
-        scalar_t* out = c + i * G;
-        for (int64_t j = 0; j < G; ++j) out[j] = 0;
-        for (int64_t k = 0; k < nk; ++k) {
-          const scalar_t wk = w[i * nk + k];
-          const scalar_t* lk = l + (i * nk + k) * 3;
-          const scalar_t* sk = s + (i * nk + k) * nf2x3;
-          for (int j = 0; j < 3; ++j) out[j] += wk * lk[j];
-          for (int64_t j = 0; j < nf2x3; ++j) out[3 + j] += wk * sk[j];
-        }
-      }
+      for (int64_t i = begin; i < end; ++i)
+        weighted_code_any(c + i * G, w + i * nk, l + i * nk * 3, s + i * nk * nf2x3, nk, nf2x3);
     });
   });
   return codes;
