@@ -480,6 +480,14 @@ int run(int argc, char** argv) {
         double fwd_s = 0;
       };
       std::map<std::pair<int64_t, size_t>, Cell> best;
+      // The inference frame of each path, prepared under its products (the readout windows are
+      // stored in the type the path's products read).
+      std::vector<model::FrameCache> inference(precisions.size());
+      for (size_t path = 0; path < precisions.size(); ++path) {
+        torch::NoGradGuard ng;
+        net->set_products(products_of(precisions[path]));
+        inference[path] = net->prepare(scene.in, rc.cull_distance);
+      }
       for (int round = 0; round < rounds; ++round)
         for (const int64_t chunk : chunks)
           for (size_t path = 0; path < precisions.size(); ++path) {
@@ -506,14 +514,14 @@ int run(int argc, char** argv) {
               net->set_profile(&fwd_profile);
               const auto t_fwd = Clock::now();
               fwd = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
-                net->forward(cache_ng, p, d);
+                net->forward(inference[path], p, d);
               });
               const double fwd_seconds = seconds_since(t_fwd);
               net->set_profile(nullptr);
               if (fwd > best[key].fwd)
                 best[key].profile = fwd_profile, best[key].fwd_s = fwd_seconds;
               dfirst = rate([&](const torch::Tensor& p, const torch::Tensor& d) {
-                net->forward_density_first(cache_ng, p, d);
+                net->forward_density_first(inference[path], p, d);
               });
             }
             fb = rate([&](const torch::Tensor& p, const torch::Tensor& d) {

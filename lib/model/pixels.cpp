@@ -15,13 +15,15 @@ namespace th::model {
 
 namespace {
 
-// The window form of a readout: its values at every window pixel, read from its level table.
+// The window form of a readout: its values at every window pixel, read from its level table
+// and stored in `type` (bf16: rounded once, to nearest even).
 WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight,
                         const torch::Tensor& bias, const PixelWindows& windows,
-                        const torch::Tensor& uv, const torch::Tensor& view,
-                        const PixelGeometry& g) {
+                        const torch::Tensor& uv, const torch::Tensor& view, const PixelGeometry& g,
+                        c10::ScalarType type) {
   constexpr int64_t kChunk = 65536;  // window pixels per step: bounds the taps' memory
-  WindowReadout w{torch::empty({windows.rows(), r.table.size(1)}, r.table.options()), weight, bias};
+  WindowReadout w{torch::empty({windows.rows(), r.table.size(1)}, r.table.options().dtype(type)),
+                  weight, bias};
   render::for_each_chunk(windows.rows(), kChunk, [&](int64_t b, int64_t e) {
     const auto u = uv.slice(0, b, e), v = view.slice(0, b, e);
     w.table.slice(0, b, e).copy_(r.sample(g.stacked_level_taps(u, v), g.image_taps(u, v)));
@@ -33,7 +35,8 @@ WindowReadout to_window(const PixelReadout& r, const torch::Tensor& weight,
 
 PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
                           const HeadsFolded& heads, const FrameGeometry& geometry,
-                          const torch::Tensor& vertices, double cull_distance) {
+                          const torch::Tensor& vertices, double cull_distance,
+                          c10::ScalarType window_type) {
   if (!fdi.alpha_res_0) return NoPixels{};
   const auto& alpha = *fdi.alpha_res_0;
   if (torch::GradMode::is_enabled() || !kernels::cpu_kernels(enc.images.device()) ||
@@ -52,10 +55,10 @@ PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, c
   // only the rows the windows read.
   const auto footprint = px.windows.footprint(enc.geometry, uv.options());
   px.alpha = to_window(encoder.make_readout(enc, alpha.weight, alpha.bias, &footprint),
-                       alpha.weight, alpha.bias, px.windows, uv, view, enc.geometry);
-  px.color =
-      to_window(encoder.make_readout(enc, heads.readout_weight, heads.readout_bias, &footprint),
-                heads.readout_weight, heads.readout_bias, px.windows, uv, view, enc.geometry);
+                       alpha.weight, alpha.bias, px.windows, uv, view, enc.geometry, window_type);
+  px.color = to_window(
+      encoder.make_readout(enc, heads.readout_weight, heads.readout_bias, &footprint),
+      heads.readout_weight, heads.readout_bias, px.windows, uv, view, enc.geometry, window_type);
   px.enc = enc;  // for points outside the windows
   return px;
 }

@@ -27,10 +27,12 @@ class FDIImpl;
 // The pixel stage of a frame, in the form that suits where and how it runs: none without the
 // appearance branch ("w/o a"); readout windows where autograd does not record, the CPU kernels
 // run (model/kernels/forms.hpp) and points are bounded to the body (`cull_distance` > 0); the
-// level readouts otherwise.
+// level readouts otherwise. The window tables are stored in `window_type` (the readouts' own
+// type, or bf16 from fp32 ones: Products::between); their gathers sum in fp32.
 PixelStage prepare_pixels(const EncoderImpl& encoder, const EncodedViews& enc, const FDIImpl& fdi,
                           const HeadsFolded& heads, const FrameGeometry& geometry,
-                          const torch::Tensor& vertices, double cull_distance);
+                          const torch::Tensor& vertices, double cull_distance,
+                          c10::ScalarType window_type);
 
 enum class PixelLayer { appearance, colour };
 // The layer's readout at the projections uv (N, V, 2) -> (N, V, Cout), clamped at zero with

@@ -13,6 +13,8 @@
 //   so by the kernels that make them (DPaRF's and the appearance readout's gathers, the view
 //   attention) after computing them in fp32, and read as bf16 by the kernels after them (the view
 //   attention, the heads' view means).
+// - the readout windows' tables (model/pixels.hpp): bf16 under bf16, the gathers that read them
+//   sum in fp32.
 // - per-frame modules (ResNet encoder, TransHE: convolutions, linear layers, attention
 //   products): fp32; autocast to bf16 under bf16, outputs cast back to fp32.
 // - everything else (positional encodings, DPaRF's distances, nearest fields and weights, the

@@ -80,8 +80,8 @@ FrameCache TransHumanImpl::prepare(const FrameInputs& in, double cull_distance) 
   }
   // What the per-point stages read of p_v: alpha_res_0 and the colour head's readout.
   ScopedTimer timer(profile_, "readouts");
-  frame.pixels =
-      prepare_pixels(*encoder, enc, *fdi, frame.network.heads, geo, in.vertices, cull_distance);
+  frame.pixels = prepare_pixels(*encoder, enc, *fdi, frame.network.heads, geo, in.vertices,
+                                cull_distance, products_.between(enc.images.scalar_type()));
   return frame;
 }
 

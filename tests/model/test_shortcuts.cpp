@@ -127,10 +127,25 @@ TEST_CASE("the gather's epilogue equals its operations done after the gather",
       torch::autograd::grad({rows32}, {t32}, {g.to(torch::kBFloat16).to(torch::kFloat)})[0];
   CHECK(g16.scalar_type() == torch::kFloat);
   CHECK(max_abs(g16, g32) < 1e-6);
+  // A bf16 table (the readout windows under bf16): each value widened as it is read, the sums in
+  // fp32, fp32 or bf16 rows; the same as the widened table's, to the bit.
+  const auto t16 = t32.detach().to(torch::kBFloat16), widened = t16.to(torch::kFloat);
+  for (const auto dtype :
+       {c10::optional<c10::ScalarType>(), c10::make_optional(torch::kBFloat16)}) {
+    const kernels::GatherEpilogue epilogue{a32, true, dtype};
+    const auto rows = kernels::weighted_gather(t16, taps, {}, epilogue);
+    CHECK(rows.scalar_type() == dtype.value_or(torch::kFloat));
+    CHECK(torch::equal(rows, kernels::weighted_gather(widened, taps, {}, epilogue)));
+    kernels::LibTorchForms forms;
+    CHECK(max_abs(kernels::weighted_gather(t16, taps, {}, epilogue),
+                  kernels::weighted_gather(widened, taps, {}, epilogue)) == 0);
+  }
+  CHECK_THROWS_WITH(kernels::weighted_gather(t16.clone().requires_grad_(true), taps),
+                    Catch::Contains("a bf16 table is read only"));
   // A float64 table writes no bf16 rows.
   CHECK_THROWS_WITH(
       kernels::weighted_gather(table.detach(), taps, {}, {{}, false, torch::kBFloat16}),
-      Catch::Contains("bf16 from a float table"));
+      Catch::Contains("bf16 from fp32 sums"));
 }
 
 TEST_CASE("pixel readouts equal the linear layer on the materialised pixel feature",
@@ -300,6 +315,41 @@ TEST_CASE("the one-pass DPaRF query equals its LibTorch form", "[model][shortcut
         CHECK(max_abs(kernels::weighted_codes(a), kernels::weighted_codes(b)) < 1e-5);
       }
     }
+  }
+}
+
+TEST_CASE("the DPaRF query picks the nearest fields, ties by index, NaN never nearer",
+          "[model][shortcuts]") {
+  // Origins on a coarse lattice, each position three times at indices far apart (other blocks
+  // of the selection's scan), points on and between lattice positions: many exact ties.
+  torch::manual_seed(10);
+  const auto lattice = torch::randint(0, 3, {25, 3}).to(torch::kFloat) * 0.25;
+  const auto origins = torch::cat({lattice, lattice.flip(0), lattice});  // 75 origins
+  const int64_t nt = origins.size(0);
+  auto xs = torch::cat({lattice.index_select(0, torch::randint(0, 25, {100})),
+                        torch::randint(0, 5, {100, 3}).to(torch::kFloat) * 0.125});
+  xs[7][1] = std::nanf("");  // a point with NaN distances
+  const auto rotations = torch::eye(3).expand({nt, 3, 3});
+  const float* o = origins.data_ptr<float>();
+  for (int64_t nk : {1, 4, 9}) {
+    const auto q = kernels::nearest_fields(xs, origins, rotations, {nk, 0.5, false, 10, true});
+    // Expected: a stable sort of the exact squared distances, NaN last.
+    auto expected = torch::empty({xs.size(0), nk}, torch::kLong);
+    for (int64_t n = 0; n < xs.size(0); ++n) {
+      std::vector<std::pair<float, int64_t>> d;
+      for (int64_t t = 0; t < nt; ++t) {
+        const float dx = xs[n][0].item<float>() - o[3 * t],
+                    dy = xs[n][1].item<float>() - o[3 * t + 1],
+                    dz = xs[n][2].item<float>() - o[3 * t + 2];
+        d.emplace_back(dx * dx + dy * dy + dz * dz, t);
+      }
+      std::stable_sort(d.begin(), d.end(), [](const auto& a, const auto& b) {
+        return std::isnan(b.first) ? !std::isnan(a.first) : a.first < b.first;
+      });
+      for (int64_t k = 0; k < nk; ++k) expected[n][k] = d[k].second;
+    }
+    INFO("nk " << nk);
+    CHECK(torch::equal(q.index, expected));
   }
 }
 
@@ -508,6 +558,23 @@ TEST_CASE("readout windows give the level tables' values, inside and outside the
   const auto ya = model->forward(a, pts, dirs), yb = model->forward(b, pts, dirs);
   INFO("max |raw| " << yb.abs().max().item<double>());
   CHECK(max_abs(ya, yb) < 1e-5 * (1 + yb.abs().max().item<double>()));
+  CHECK(std::get<WindowReadouts>(a.pixels).alpha.table.scalar_type() == torch::kFloat);
+  {  // Under bf16 the window tables are stored in bf16 (their gathers sum in fp32): the outputs
+     // differ from the level tables' by that rounding only.
+    Products bf16;
+    bf16.precision = Precision::bf16;
+    model->set_products(bf16);
+    const auto c = model->prepare(frame.inputs, 0.1), d = model->prepare(frame.inputs, 0);
+    const auto& windows = std::get<WindowReadouts>(c.pixels);
+    CHECK(windows.alpha.table.scalar_type() == torch::kBFloat16);
+    CHECK(windows.color.table.scalar_type() == torch::kBFloat16);
+    const auto yc = model->forward(c, pts, dirs), yd = model->forward(d, pts, dirs);
+    const double scale = 1 + yd.abs().max().item<double>();
+    INFO("bf16: max |raw| " << scale - 1 << ", windows against levels " << max_abs(yc, yd));
+    CHECK(max_abs(yc, yd) < 1e-2 * scale);
+    CHECK(max_abs(yc, yd) > 1e-5 * scale);  // the tables' rounding shows
+    model->set_products(Products{});
+  }
   // Under autograd (training) the level tables stay.
   torch::AutoGradMode grad(true);
   CHECK(std::holds_alternative<PixelReadouts>(model->prepare(frame.inputs, 0.1).pixels));

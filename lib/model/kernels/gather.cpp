@@ -36,6 +36,21 @@ inline __attribute__((always_inline)) void gather_row(T* __restrict out, const T
   }
 }
 
+// The same sum over a bf16 table (per-frame tables stored in bf16, model/precision.hpp): each
+// value widened to fp32 as it is read, the sums in fp32.
+inline __attribute__((always_inline)) void gather_row_bf16(float* __restrict out,
+                                                           const uint16_t* __restrict table,
+                                                           RowTaps<float> r) {
+  const int64_t C = r.channels;
+  for (int64_t c = 0; c < C; ++c) out[c] = 0;
+  for (int64_t t = 0; t < r.taps; ++t) {
+    const float w = r.weight[t];
+    if (w == 0.0f) continue;
+    const uint16_t* __restrict row = table + r.index[t] * C;
+    for (int64_t c = 0; c < C; ++c) out[c] += w * bf16_value(row[c]);
+  }
+}
+
 // Adds w * grad_out[c0, c1) into the tapped rows of grad_table.
 template <class T>
 inline __attribute__((always_inline)) void scatter_row(T* __restrict grad_table,
@@ -53,6 +68,10 @@ __attribute__((target_clones("avx512f", "avx2", "default"))) void gather_row_f(f
                                                                                const float* table,
                                                                                RowTaps<float> r) {
   gather_row<float>(out, table, r);
+}
+__attribute__((target_clones("avx512f", "avx2", "default"))) void gather_row_b(
+    float* out, const uint16_t* table, RowTaps<float> r) {
+  gather_row_bf16(out, table, r);
 }
 __attribute__((target_clones("avx512f", "avx2", "default"))) void scatter_row_f(
     float* grad_table, const float* grad_out, RowTaps<float> r, int64_t c0, int64_t c1) {
@@ -86,6 +105,9 @@ void gather_row_any(float* out, const float* table, RowTaps<float> r) {
 void gather_row_any(double* out, const double* table, RowTaps<double> r) {
   gather_row<double>(out, table, r);
 }
+void gather_row_any(float* out, const c10::BFloat16* table, RowTaps<float> r) {
+  gather_row_b(out, reinterpret_cast<const uint16_t*>(table), r);
+}
 void scatter_row_any(float* gt, const float* g, RowTaps<float> r, int64_t c0, int64_t c1) {
   scatter_row_f(gt, g, r, c0, c1);
 }
@@ -97,31 +119,48 @@ void scatter_row_any(double* gt, const double* g, RowTaps<double> r, int64_t c0,
 void store_bf16(c10::BFloat16* out, const float* row, int64_t n) { to_bf16(out, row, n); }
 void store_bf16(c10::BFloat16*, const double*, int64_t) {}
 
-// The forward pass: rows summed in the table's type, finished in cache, written in `dtype` (the
-// table's, or bf16 from a float table).
+// The sum type of a table's gather: its own, fp32 for a bf16 table.
+c10::ScalarType sum_type(const torch::Tensor& table) {
+  return table.scalar_type() == torch::kBFloat16 ? torch::kFloat : table.scalar_type();
+}
+
+// Rows of a table of S summed in T (S itself, or fp32 for bf16), finished in cache, written in
+// `dtype` (T, or bf16 from fp32 sums).
+template <class T, class S>
+void gather_rows(const torch::Tensor& table, const torch::Tensor& index,
+                 const torch::Tensor& weight, const torch::Tensor& addend, bool relu,
+                 torch::Tensor& out) {
+  const int64_t M = index.size(0), T_ = index.size(1), C = table.size(1);
+  const bool to_bf16_rows = out.scalar_type() != c10::CppTypeToScalarType<T>::value;
+  const S* tab = table.data_ptr<S>();
+  const int64_t* idx = index.data_ptr<int64_t>();
+  const T* w = weight.data_ptr<T>();
+  const T* add = addend.defined() ? addend.data_ptr<T>() : nullptr;
+  const int64_t G = addend.defined() ? addend.size(1) : C;
+  T* o = to_bf16_rows ? nullptr : out.data_ptr<T>();
+  c10::BFloat16* ob = to_bf16_rows ? out.data_ptr<c10::BFloat16>() : nullptr;
+  at::parallel_for(0, M, 64, [&](int64_t begin, int64_t end) {
+    std::vector<T> scratch(to_bf16_rows ? C : 0);
+    for (int64_t m = begin; m < end; ++m) {
+      T* row = to_bf16_rows ? scratch.data() : o + m * C;
+      gather_row_any(row, tab, RowTaps<T>{idx + m * T_, w + m * T_, T_, C});
+      if (add || relu) finish_row_any(row, add ? add + m * G : nullptr, C, G, relu);
+      if (to_bf16_rows) store_bf16(ob + m * C, row, C);
+    }
+  });
+}
+
+// The forward pass: the output in `dtype` (the sum type, or bf16 from fp32 sums).
 torch::Tensor gather_forward_cpu(const torch::Tensor& table, const torch::Tensor& index,
                                  const torch::Tensor& weight, const torch::Tensor& addend,
                                  bool relu, c10::ScalarType dtype) {
-  const int64_t M = index.size(0), T_ = index.size(1), C = table.size(1);
-  auto out = torch::empty({M, C}, table.options().dtype(dtype));
-  const bool to_bf16_rows = dtype != table.scalar_type();
+  auto out = torch::empty({index.size(0), table.size(1)}, table.options().dtype(dtype));
+  if (table.scalar_type() == torch::kBFloat16) {
+    gather_rows<float, c10::BFloat16>(table, index, weight, addend, relu, out);
+    return out;
+  }
   AT_DISPATCH_FLOATING_TYPES(table.scalar_type(), "weighted_gather", [&] {
-    const scalar_t* tab = table.data_ptr<scalar_t>();
-    const int64_t* idx = index.data_ptr<int64_t>();
-    const scalar_t* w = weight.data_ptr<scalar_t>();
-    const scalar_t* add = addend.defined() ? addend.data_ptr<scalar_t>() : nullptr;
-    const int64_t G = addend.defined() ? addend.size(1) : C;
-    scalar_t* o = to_bf16_rows ? nullptr : out.data_ptr<scalar_t>();
-    c10::BFloat16* ob = to_bf16_rows ? out.data_ptr<c10::BFloat16>() : nullptr;
-    at::parallel_for(0, M, 64, [&](int64_t begin, int64_t end) {
-      std::vector<scalar_t> scratch(to_bf16_rows ? C : 0);
-      for (int64_t m = begin; m < end; ++m) {
-        scalar_t* row = to_bf16_rows ? scratch.data() : o + m * C;
-        gather_row_any(row, tab, RowTaps<scalar_t>{idx + m * T_, w + m * T_, T_, C});
-        if (add || relu) finish_row_any(row, add ? add + m * G : nullptr, C, G, relu);
-        if (to_bf16_rows) store_bf16(ob + m * C, row, C);
-      }
-    });
+    gather_rows<scalar_t, scalar_t>(table, index, weight, addend, relu, out);
   });
   return out;
 }
@@ -345,12 +384,15 @@ torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
                     table.size(1) % addend.size(1) == 0,
                 "gather addend must be (", taps.index.size(0), ", G) with G dividing ",
                 table.size(1), ", got ", addend.sizes());
-  const auto dtype = epilogue.dtype.value_or(table.scalar_type());
-  TORCH_CHECK(dtype == table.scalar_type() ||
-                  (dtype == torch::kBFloat16 && table.scalar_type() == torch::kFloat),
-              "weighted_gather writes the table's type, or bf16 from a float table; asked for ",
-              dtype, " from ", table.scalar_type());
-  const auto weight = taps.weight.to(table.scalar_type()).contiguous();
+  const auto sums = sum_type(table);
+  const auto dtype = epilogue.dtype.value_or(sums);
+  TORCH_CHECK(dtype == sums || (dtype == torch::kBFloat16 && sums == torch::kFloat),
+              "weighted_gather writes its sums' type, or bf16 from fp32 sums; asked for ", dtype,
+              " from a ", table.scalar_type(), " table");
+  TORCH_CHECK(
+      table.scalar_type() != torch::kBFloat16 || (!table.requires_grad() && !grad_sink.defined()),
+      "weighted_gather: a bf16 table is read only (no gradient)");
+  const auto weight = taps.weight.to(sums).contiguous();
   if (!cpu_kernels(table.device())) {
     // gather, weight, sum (autograd through index_select), then the epilogue
     const auto M = taps.index.size(0), T_ = taps.index.size(1);
@@ -375,8 +417,7 @@ torch::Tensor weighted_gather(const torch::Tensor& table, const Taps& taps,
   }
   return WeightedGather::apply(
       table.contiguous(), taps.index.contiguous(), weight,
-      addend.defined() ? addend.to(table.scalar_type()).contiguous()
-                       : torch::empty({0}, table.options()),
+      addend.defined() ? addend.to(sums).contiguous() : torch::empty({0}, table.options()),
       grad_sink.defined() ? c10::optional<torch::Tensor>(grad_sink) : c10::nullopt, epilogue.relu,
       static_cast<int64_t>(dtype));
 }
